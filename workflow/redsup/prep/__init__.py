@@ -1,0 +1,1 @@
+"""Data preparation: raw canonical scenes to training/evaluation inputs."""

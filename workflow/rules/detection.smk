@@ -1,0 +1,75 @@
+# Stand-ins for pretrained 2D perception (instance segmenter at two quality levels, road segmenter),
+# L_m point sets, 3D tracks across frames, and MedianFlow box tracks of the velocity clips.
+
+
+rule detect_instances:
+    input:
+        scene="results/raw/{dataset}/{scene}",
+        mlflow=ancient(REGISTRY),
+    output:
+        "results/prepared/{dataset}/{scene}/detections_{level}.npz",
+    log:
+        "results/logs/detect_instances/{dataset}/{scene}/{level}.log",
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=30,
+    conda:
+        ENV
+    script:
+        "../scripts/detect_instances.py"
+
+
+rule segment_road:
+    input:
+        scene="results/raw/{dataset}/{scene}",
+        mlflow=ancient(REGISTRY),
+    output:
+        "results/prepared/{dataset}/{scene}/road.npz",
+    log:
+        "results/logs/segment_road/{dataset}/{scene}.log",
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=30,
+    conda:
+        ENV
+    script:
+        "../scripts/segment_road.py"
+
+
+rule tracks3d:
+    input:
+        scene="results/raw/{dataset}/{scene}",
+        detections="results/prepared/{dataset}/{scene}/detections_{level}.npz",
+        mlflow=ancient(REGISTRY),
+    output:
+        "results/prepared/{dataset}/{scene}/tracks3d_{level}.csv",
+    log:
+        "results/logs/tracks3d/{dataset}/{scene}/{level}.log",
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=20,
+    conda:
+        ENV
+    script:
+        "../scripts/tracks3d.py"
+
+
+rule medianflow:
+    input:
+        clips="results/raw/clips/{split}",
+        mlflow=ancient(REGISTRY),
+    output:
+        "results/prepared/clips/{split}/medianflow.npz",
+    log:
+        "results/logs/medianflow/{split}.log",
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=60,
+    conda:
+        ENV
+    script:
+        "../scripts/medianflow.py"

@@ -1,0 +1,37 @@
+# Camera images cropped and resized with adjusted intrinsics, and sparse LiDAR depth maps per camera.
+
+
+rule prepare_camera:
+    input:
+        scene="results/raw/{dataset}/{scene}",
+        mlflow=ancient(REGISTRY),
+    output:
+        "results/prepared/{dataset}/{scene}/{camera}.npz",
+    log:
+        "results/logs/prepare_camera/{dataset}/{scene}/{camera}.log",
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=30,
+    conda:
+        ENV
+    script:
+        "../scripts/prepare_camera.py"
+
+
+rule lidar_depth:
+    input:
+        scene="results/raw/{dataset}/{scene}",
+        mlflow=ancient(REGISTRY),
+    output:
+        "results/prepared/{dataset}/{scene}/{camera}_depth.npz",
+    log:
+        "results/logs/lidar_depth/{dataset}/{scene}/{camera}.log",
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=30,
+    conda:
+        ENV
+    script:
+        "../scripts/lidar_depth.py"

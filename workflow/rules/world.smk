@@ -1,0 +1,36 @@
+# The embedded driving world: scenes in the canonical raw-scene format, and motorway clips in the
+# TuSimple shape. Generation is deterministic given config seed, dataset, split and index.
+
+
+rule world_scene:
+    input:
+        mlflow=ancient(REGISTRY),
+    output:
+        directory("results/raw/{dataset}/{scene}"),
+    log:
+        "results/logs/world_scene/{dataset}/{scene}.log",
+    threads: 1
+    resources:
+        mem_mb=3000,
+        runtime=60,
+    conda:
+        ENV
+    script:
+        "../scripts/world_scene.py"
+
+
+rule world_clips:
+    input:
+        mlflow=ancient(REGISTRY),
+    output:
+        directory("results/raw/clips/{split}"),
+    log:
+        "results/logs/world_clips/{split}.log",
+    threads: 1
+    resources:
+        mem_mb=3000,
+        runtime=60,
+    conda:
+        ENV
+    script:
+        "../scripts/world_clips.py"
