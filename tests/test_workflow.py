@@ -1,0 +1,110 @@
+"""The whole DAG end to end under the tiny profile, in a temporary working directory.
+
+One module-scoped build; the tests then check outputs, the MLflow store, idempotence (a second run has
+nothing to do), lint, and that bad inputs fail their own job with a clear message.
+"""
+import json
+import shutil
+import sqlite3
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SNAKEMAKE = [sys.executable, "-m", "snakemake", "--snakefile", str(ROOT / "Snakefile"), "--cores", "2"]
+
+pytestmark = pytest.mark.workflow
+
+
+def run_snakemake(workdir, *args, check=True):
+    proc = subprocess.run([*SNAKEMAKE, "--directory", str(workdir), "--config", "profile=tiny", *args],
+                          capture_output=True, text=True, timeout=900)
+    if check and proc.returncode != 0:
+        raise AssertionError(f"snakemake {' '.join(args)} failed:\n{proc.stdout[-4000:]}\n{proc.stderr[-8000:]}")
+    return proc
+
+
+@pytest.fixture(scope="module")
+def built(tmp_path_factory):
+    workdir = tmp_path_factory.mktemp("tiny")
+    run_snakemake(workdir, "all")
+    return workdir
+
+
+def test_all_targets_exist(built):
+    for table in ("data_summary", "mccraith_ch3_table1"):
+        for ext in ("md", "csv", "tex"):
+            assert (built / "results" / "tables" / f"{table}.{ext}").stat().st_size > 0
+    assert "mccraith_ch3_table1" in (built / "results" / "tables" / "scorecard.md").read_text()
+    assert (built / "results" / "figures" / "world_frame_overview.png").stat().st_size > 10_000
+
+
+def test_second_run_has_nothing_to_do(built):
+    proc = run_snakemake(built, "all")
+    assert "Nothing to be done" in proc.stdout + proc.stderr
+
+
+def test_lidar_depth_agrees_with_renderer(built):
+    logs = list((built / "results" / "logs" / "lidar_depth").rglob("cam_front.log"))
+    assert logs
+    for log in logs:
+        summary = eval(log.read_text().strip().splitlines()[-1], {"nan": float("nan")})  # the printed dict
+        assert summary["lidar_vs_render_median_rel_error"] < 0.01, log
+
+
+def test_prepared_camera_files(built):
+    files = sorted((built / "results" / "prepared").rglob("cam_front.npz"))
+    assert files
+    with np.load(files[0]) as data:
+        images, K = data["images"], data["K"]
+        assert images.dtype == np.uint8 and images.ndim == 4 and images.shape[-1] == 3
+        assert K.shape == (3, 3) and 0 < K[0, 2] < images.shape[2] and 0 < K[1, 2] < images.shape[1]
+        assert images.std() > 10  # textured, not flat colours
+
+
+def test_mlflow_store_has_parents_and_children(built):
+    registry = json.loads((built / "results" / "mlflow" / "registry.json").read_text())
+    assert {"data_preparation", "world", "mccraith_ch3_table1"} <= set(registry["parents"])
+    con = sqlite3.connect(built / "results" / "mlflow.db")
+    statuses = dict(con.execute("select status, count(*) from runs group by status").fetchall())
+    assert statuses.get("RUNNING", 0) == 0 and statuses.get("FAILED", 0) == 0
+    children = con.execute("select count(*) from tags where key = 'mlflow.parentRunId'").fetchone()[0]
+    assert children >= 10
+
+
+def test_lint_is_clean():
+    proc = subprocess.run([*SNAKEMAKE, "--lint", "--config", "profile=tiny"], capture_output=True,
+                          text=True, cwd=ROOT, timeout=300)
+    assert proc.returncode == 0, proc.stdout + proc.stderr
+    assert "Lints for" not in proc.stdout + proc.stderr, proc.stdout + proc.stderr
+
+
+def test_misspelled_config_key_fails_with_its_name(tmp_path):
+    proc = subprocess.run([*SNAKEMAKE, "--directory", str(tmp_path), "-n", "--config", "profile=tiny",
+                           "seeed=3"], capture_output=True, text=True, timeout=300)
+    assert proc.returncode != 0 and "seeed" in proc.stdout + proc.stderr
+
+
+def test_truncated_lidar_fails_its_own_jobs_only(built, tmp_path):
+    """Corrupt one sweep: its depth jobs fail naming the file, leave no output; the rest completes."""
+    work = tmp_path / "w"
+    shutil.copytree(built, work, symlinks=True)
+    scene = next(p for p in sorted((work / "results" / "raw").glob("*/test_*")))
+    sweep = scene / "lidar_top" / "000001.bin"
+    sweep.write_bytes(sweep.read_bytes()[:-5])
+    target = scene.parent.name + "/" + scene.name
+    victim = work / "results" / "prepared" / target / "cam_front_depth.npz"
+    other = next(p for p in (work / "results" / "prepared").rglob("cam_front_depth.npz")
+                 if target not in str(p))
+    victim.unlink()
+    other.unlink()
+    proc = run_snakemake(work, "--keep-going", str(victim.relative_to(work)), str(other.relative_to(work)),
+                         check=False)
+    assert proc.returncode != 0
+    log = (work / "results" / "logs" / "lidar_depth" / target / "cam_front.log").read_text()
+    assert "000001.bin" in log and "not a multiple of the 16-byte record" in log
+    assert not victim.exists() and not victim.with_name(victim.name + ".part").exists()
+    assert other.exists()
