@@ -33,7 +33,6 @@ import json
 import os
 import signal
 import subprocess
-import tempfile
 import threading
 import time
 from collections.abc import Iterator, Mapping
@@ -286,7 +285,10 @@ class RunHandle:
         """A pandas DataFrame as a CSV artifact (``name`` gets ``.csv`` if it has no suffix)."""
         if not Path(name).suffix:
             name = f"{name}.csv"
-        _retry(self.client.log_text, self.run_id, df.to_csv(index=df.index.name is not None), name)
+        import pandas as pd
+
+        keep_index = not isinstance(df.index, pd.RangeIndex)
+        _retry(self.client.log_text, self.run_id, df.to_csv(index=keep_index), name)
         return name
 
     def log_dict(self, data: Mapping[str, Any], name: str) -> None:
@@ -428,7 +430,3 @@ def log_table_artifacts(registry_json: str | Path, parent: str, paths, *,
         _retry(client.set_tag, run_id, key, str(value))
     return run_id
 
-
-def scratch_dir() -> Path:
-    """A temporary folder for artifacts built before logging."""
-    return Path(tempfile.mkdtemp(prefix="redsup-mlflow-"))

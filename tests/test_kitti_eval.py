@@ -1,0 +1,316 @@
+"""KITTI-convention IoU and AP (redsup.det3d.boxes / kitti_eval) against hand-computed cases and a
+loop-for-loop transliteration of the devkit's computeStatistics / eval_class."""
+import math
+
+import numpy as np
+import pytest
+
+from redsup.det3d import boxes as B
+from redsup.det3d import kitti_eval as K
+
+
+# ----------------------------------------------------------------------------------------------- IoU
+@pytest.mark.parametrize("yaw", [0.3, math.pi / 4])
+def test_rotated_square_shifted_along_its_axis(yaw):
+    # side 2, shifted 0.5 along its own heading: intersection 1.5 x 2 = 3, union 8 - 3 = 5
+    a = np.array([[1.0, -2.0, 0.0, 2.0, 2.0, 1.0, yaw]])
+    b = a.copy()
+    b[0, 0] += 0.5 * math.cos(yaw)
+    b[0, 1] += 0.5 * math.sin(yaw)
+    assert B.bev_iou(a, b)[0, 0] == pytest.approx(0.6, abs=1e-12)
+    assert B.bev_iou(a, b, method="shapely")[0, 0] == pytest.approx(0.6, abs=1e-12)
+    assert B.iou_3d(a, b)[0, 0] == pytest.approx(0.6, abs=1e-12)
+
+
+def test_diamond_shifted_along_x():
+    # a 2 x 2 square at 45 deg shifted by d along x moves by d/sqrt2 along both of its axes:
+    # intersection (2 - d/sqrt2)^2 = 1.5^2 for d = sqrt2 / 2, IoU = 2.25 / (8 - 2.25) = 9/23
+    a = np.array([[0.0, 0.0, 0.0, 2.0, 2.0, 1.0, math.pi / 4]])
+    b = a.copy()
+    b[0, 0] += math.sqrt(2) / 2
+    assert B.bev_iou(a, b)[0, 0] == pytest.approx(9 / 23, abs=1e-12)
+
+
+def test_3d_iou_half_vertical_overlap():
+    a = np.array([[5.0, 1.0, 0.75, 3.9, 1.6, 1.5, 0.4]])
+    b = a.copy()
+    b[0, 2] += 0.75
+    assert B.bev_iou(a, b)[0, 0] == pytest.approx(1.0)
+    assert B.iou_3d(a, b)[0, 0] == pytest.approx(1 / 3, abs=1e-12)   # A h/2 / (2 A h - A h / 2)
+
+
+def test_pairwise_matrix_matches_shapely_and_handles_nan():
+    rng = np.random.default_rng(0)
+    a = np.c_[rng.uniform(-3, 3, (30, 2)), rng.uniform(-1, 1, 30), rng.uniform(1, 5, (30, 1)),
+              rng.uniform(0.5, 2, (30, 1)), rng.uniform(1, 2, 30), rng.uniform(-4, 4, 30)]
+    b = a[::-1].copy() + rng.normal(0, 0.3, a.shape)
+    b[3] = np.nan
+    m = B.iou_3d(a, b)
+    assert m.shape == (30, 30) and np.isfinite(m).all() and (m[:, 3] == 0).all()
+    assert np.allclose(m, B.iou_3d(a, b, method="shapely"), atol=1e-9)
+    assert np.allclose(np.diag(B.bev_iou(a, a)), 1.0)
+
+
+def test_image_box_overlap_criteria():
+    a = np.array([[0.0, 0.0, 30.0, 60.0]])
+    b = np.array([[10.0, 0.0, 40.0, 60.0], [100.0, 0, 110, 10]])
+    assert np.allclose(B.image_box_overlap(a, b), [[0.5, 0.0]])
+    assert np.allclose(B.image_box_overlap(a, b, criterion=0), [[2 / 3, 0.0]])
+
+
+def test_boxes_to_image_bbox_projects_corners():
+    Kmat = np.array([[100.0, 0, 50], [0, 100.0, 40], [0, 0, 1]])
+    T_cam_veh = np.array([[0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0], [0, 0, 0, 1]], dtype=float)
+    box = np.array([[10.0, 0.0, 0.0, 2.0, 2.0, 2.0, 0.0], [-10.0, 0, 0, 2, 2, 2, 0]])
+    bb = B.boxes_to_image_bbox(box, T_cam_veh, Kmat, (100, 80))
+    # nearest face at depth 9 spans +-1 m: u = 50 +- 100/9, v = 40 +- 100/9
+    assert np.allclose(bb[0], [50 - 100 / 9, 40 - 100 / 9, 50 + 100 / 9, 40 + 100 / 9])
+    assert np.isnan(bb[1]).all()
+
+
+# ------------------------------------------------------------------------------------ AP fixtures
+def _car(x, y=0.0, l=3.9, w=1.6, yaw=0.0):
+    return [x, y, 0.75, l, w, 1.5, yaw]
+
+
+def _scene(objects):
+    """objects: list of frames; each frame a (gts, dets) pair of lists of dicts."""
+    gts, dets = [], []
+    for frame_gt, frame_det in objects:
+        gts.append(K.FrameGT(
+            boxes=np.array([o.get("box", [np.nan] * 7) for o in frame_gt], dtype=float).reshape(-1, 7),
+            bbox=np.array([o.get("bbox", [100, 100, 150, 160]) for o in frame_gt], dtype=float).reshape(-1, 4),
+            occlusion=np.array([o.get("occ", 0) for o in frame_gt], dtype=int),
+            truncation=np.array([o.get("trunc", 0.0) for o in frame_gt], dtype=float),
+            cls=np.array([o.get("cls", "Car") for o in frame_gt], dtype=object)))
+        dets.append(K.FrameDet(
+            boxes=np.array([o["box"] for o in frame_det], dtype=float).reshape(-1, 7),
+            bbox=np.array([o.get("bbox", [100, 100, 150, 160]) for o in frame_det], dtype=float).reshape(-1, 4),
+            score=np.array([o["score"] for o in frame_det], dtype=float),
+            cls=np.array([o.get("cls", "Car") for o in frame_det], dtype=object)))
+    return gts, dets
+
+
+def _perfect(n, start_score=0.9):
+    """n frames with one easy car each (60 px tall) detected exactly, decreasing scores."""
+    return [([{"box": _car(10.0 + i % 7)}], [{"box": _car(10.0 + i % 7), "score": start_score - 0.001 * i}])
+            for i in range(n)]
+
+
+def _ap(gts, dets, **kw):
+    return K.evaluate(gts, dets, metrics=("2d", "bev", "3d"), **kw)
+
+
+# ------------------------------------------------------------------------------------ AP hand cases
+def test_perfect_detections_score_100_everywhere():
+    frames = _perfect(41)
+    frames += [([{"box": _car(20), "occ": 1, "bbox": [0, 0, 50, 30]}],
+                [{"box": _car(20), "score": 0.5, "bbox": [0, 0, 50, 30]}]) for _ in range(5)]                       # moderate-only objects (30 px tall, occluded)
+    frames += [([{"box": _car(30), "occ": 2, "trunc": 0.4}], [{"box": _car(30), "score": 0.4}])
+               for _ in range(5)]                       # hard-only objects
+    res = _ap(*_scene(frames))
+    assert len(res) == 3 * 2 * 3 * 2
+    assert all(v == pytest.approx(100.0) for v in res.values()), res
+
+
+def test_needs_41_objects_like_the_devkit():
+    # 40 valid objects give 40 sampled thresholds: precision[40] stays 0, R40 = 39/40
+    res = _ap(*_scene(_perfect(40)))
+    assert res["Car_bev_0.7/easy_R40"] == pytest.approx(97.5)
+    assert res["Car_bev_0.7/easy_R11"] == pytest.approx(1000 / 11)
+
+
+def test_false_positive_lowest_score_is_harmless():
+    frames = _perfect(41) + [([], [{"box": _car(15), "score": 0.01}])]
+    res = _ap(*_scene(frames))
+    assert all(v == pytest.approx(100.0) for v in res.values())
+
+
+def test_false_positive_highest_score():
+    # thresholds = the 41 TP scores; at the k-th: TP k, FP 1 -> precision k/(k+1), monotone max = 41/42
+    frames = _perfect(41) + [([], [{"box": _car(15), "score": 0.99}])]
+    res = _ap(*_scene(frames))
+    for key in ("Car_bev_0.7/easy_R40", "Car_3d_0.5/hard_R40", "Car_bev_0.5/moderate_R11", "Car_2d_0.7/easy_R40"):
+        assert res[key] == pytest.approx(4100 / 42)
+
+
+def test_ground_truth_outside_difficulty_is_ignored_not_missed():
+    frames = _perfect(41) + [([{"box": _car(12), "occ": 2}], [])]     # an undetected, occlusion-2 car
+    res = _ap(*_scene(frames))
+    assert res["Car_bev_0.7/easy_R40"] == pytest.approx(100.0)
+    assert res["Car_bev_0.7/moderate_R40"] == pytest.approx(100.0)
+    # hard: 42 valid, 41 found -> getThresholds keeps 40 of the 41 scores (skips i = 31): 39/40
+    assert res["Car_bev_0.7/hard_R40"] == pytest.approx(97.5)
+
+
+def test_small_detection_is_ignored_at_its_difficulty():
+    frames = _perfect(41) + [([], [{"box": _car(15), "score": 0.99, "bbox": [0, 0, 50, 30]}])]
+    res = _ap(*_scene(frames))
+    assert res["Car_bev_0.7/easy_R40"] == pytest.approx(100.0)          # 30 px < 40: ignored
+    assert res["Car_bev_0.7/moderate_R40"] == pytest.approx(4100 / 42)   # 30 px >= 25: a false positive
+
+
+@pytest.mark.parametrize("shift,expected", [(1.0, 97.5), (0.99, 100.0)])
+def test_strictly_greater_than_threshold(shift, expected):
+    # l = 3, w = 2 boxes shifted by 1 along x: IoU = 2/4 = 0.5 exactly, not a match at 0.5
+    frames = _perfect(40)
+    gt_box, det_box = _car(10, l=3.0, w=2.0), _car(10 + shift, l=3.0, w=2.0)
+    frames.append(([{"box": gt_box}], [{"box": det_box, "score": 0.001}]))
+    if shift == 1.0:
+        assert B.bev_iou([gt_box], [det_box])[0, 0] == 0.5
+    res = K.evaluate(*_scene(frames), metrics=("bev",), iou_thresholds={"Car": (0.5,)})
+    assert res["Car_bev_0.5/easy_R40"] == pytest.approx(expected)
+
+
+def test_dontcare_regions():
+    fp = {"box": _car(25, y=5), "score": 0.99, "bbox": [300, 100, 350, 160]}
+    dc_2d = {"cls": "DontCare", "bbox": [290, 90, 360, 170]}             # no 3D box (NaN), like KITTI
+    frames = _perfect(41) + [([dc_2d], [fp])]
+    res = _ap(*_scene(frames))
+    assert res["Car_2d_0.7/easy_R40"] == pytest.approx(100.0)            # inside the DontCare box
+    assert res["Car_bev_0.7/easy_R40"] == pytest.approx(4100 / 42)       # devkit: bev uses the 3D box
+    res2 = _ap(*_scene(frames), dontcare_2d_all_metrics=True)
+    assert res2["Car_bev_0.7/easy_R40"] == pytest.approx(100.0)
+    dc_3d = dict(dc_2d, box=[25, 5, 0.75, 6.0, 4.0, 3.0, 0.0])            # a DontCare volume around it
+    res3 = _ap(*_scene(_perfect(41) + [([dc_3d], [fp])]))
+    assert res3["Car_3d_0.7/easy_R40"] == pytest.approx(100.0)
+    frames_off = _perfect(41) + [([dict(dc_2d, bbox=[0, 0, 20, 20])], [fp])]
+    assert _ap(*_scene(frames_off))["Car_2d_0.7/easy_R40"] == pytest.approx(4100 / 42)
+
+
+def test_van_is_a_neighbour_class_not_a_false_positive():
+    frames = _perfect(41) + [([{"box": _car(15), "cls": "Van"}], [{"box": _car(15), "score": 0.99}])]
+    res = _ap(*_scene(frames))
+    assert res["Car_3d_0.7/easy_R40"] == pytest.approx(100.0)
+
+
+def test_no_ground_truth_gives_nan():
+    res = K.evaluate(*_scene([([], [{"box": _car(15), "score": 0.5}])]))
+    assert all(math.isnan(v) for v in res.values())
+
+
+# ------------------------------------------------------------- loop transliteration of the devkit
+def _devkit_ap(gts, dets, cls, difficulty, metric, min_overlap):
+    """computeStatistics / eval_class of evaluate_object.cpp, one loop per loop."""
+    NO_DET = -1e7
+    prepared, n_gt = [], 0
+    for gt, det in zip(gts, dets):
+        ign_gt, ign_det = [], []
+        for i in range(len(gt.cls)):
+            name = gt.cls[i].lower()
+            height = gt.bbox[i, 3] - gt.bbox[i, 1]
+            valid = 1 if name == cls.lower() else (0 if (cls.lower(), name) == ("car", "van") else -1)
+            ignore = (gt.occlusion[i] > K.MAX_OCCLUSION[difficulty] or gt.truncation[i] > K.MAX_TRUNCATION[difficulty]
+                      or height <= K.MIN_HEIGHT[difficulty])
+            if valid == 1 and not ignore:
+                ign_gt.append(0)
+                n_gt += 1
+            elif valid == 0 or (ignore and valid == 1):
+                ign_gt.append(1)
+            else:
+                ign_gt.append(-1)
+        for j in range(len(det.score)):
+            height = abs(det.bbox[j, 3] - det.bbox[j, 1])
+            ign_det.append(1 if height < K.MIN_HEIGHT[difficulty] else (0 if det.cls[j].lower() == cls.lower() else -1))
+        ov = K._frame_overlaps(gt, det, metric) if len(gt.cls) and len(det.score) else np.zeros((len(det.score), len(gt.cls)))
+        dc = [i for i in range(len(gt.cls)) if gt.cls[i].lower() == "dontcare"]
+        dc_ov = np.zeros((len(det.score), len(dc)))
+        if dc and len(det.score):
+            sub = K.FrameGT(gt.boxes[dc], gt.bbox[dc], gt.occlusion[dc], gt.truncation[dc], gt.cls[dc])
+            dc_ov = K._frame_overlaps(sub, det, metric, criterion=0)
+        prepared.append((ign_gt, ign_det, ov, dc_ov, det.score))
+
+    def stats(ign_gt, ign_det, ov, dc_ov, score, compute_fp, thresh):
+        assigned = [False] * len(score)
+        below = [compute_fp and s < thresh for s in score]
+        tp = fp = fn = 0
+        v = []
+        for i in range(len(ign_gt)):
+            if ign_gt[i] == -1:
+                continue
+            det_idx, valid_det, max_ov, assigned_ign = -1, NO_DET, 0.0, False
+            for j in range(len(score)):
+                if ign_det[j] == -1 or assigned[j] or below[j]:
+                    continue
+                o = ov[j, i]
+                if not compute_fp and o > min_overlap and score[j] > valid_det:
+                    det_idx, valid_det = j, score[j]
+                elif compute_fp and o > min_overlap and (o > max_ov or assigned_ign) and ign_det[j] == 0:
+                    max_ov, det_idx, valid_det, assigned_ign = o, j, 1, False
+                elif compute_fp and o > min_overlap and valid_det == NO_DET and ign_det[j] == 1:
+                    det_idx, valid_det, assigned_ign = j, 1, True
+            if valid_det == NO_DET and ign_gt[i] == 0:
+                fn += 1
+            elif valid_det != NO_DET and (ign_gt[i] == 1 or ign_det[det_idx] == 1):
+                assigned[det_idx] = True
+            elif valid_det != NO_DET:
+                tp += 1
+                v.append(score[det_idx])
+                assigned[det_idx] = True
+        if compute_fp:
+            fp = sum(1 for j in range(len(score)) if not (assigned[j] or ign_det[j] != 0 or below[j]))
+            for i in range(dc_ov.shape[1]):
+                for j in range(len(score)):
+                    if assigned[j] or ign_det[j] != 0 or below[j]:
+                        continue
+                    if dc_ov[j, i] > min_overlap:
+                        assigned[j] = True
+                        fp -= 1
+        return tp, fp, fn, v
+
+    v = []
+    for p in prepared:
+        v += stats(*p, compute_fp=False, thresh=0.0)[3]
+    thr = K.thresholds(np.array(v), n_gt)
+    precision = np.zeros(41)
+    for t, th in enumerate(thr):
+        tp = fp = 0
+        for p in prepared:
+            a, b, _, _ = stats(*p, compute_fp=True, thresh=th)
+            tp, fp = tp + a, fp + b
+        precision[t] = tp / (tp + fp)
+    for t in range(len(thr)):
+        precision[t] = precision[t:].max()
+    return precision[0::4].sum() / 11 * 100, precision[1:].sum() / 40 * 100
+
+
+def _random_scene(rng, n_frames):
+    frames = []
+    for _ in range(n_frames):
+        g = []
+        for _ in range(rng.integers(0, 6)):
+            top = rng.uniform(0, 100)
+            g.append({"box": _car(rng.uniform(5, 40), rng.uniform(-8, 8), yaw=rng.uniform(-3, 3)),
+                      "bbox": [10, top, 60, top + rng.choice([20, 25, 30, 40, 41, 80])],
+                      "occ": int(rng.choice([0, 0, 1, 2, 3])), "trunc": float(rng.choice([0.0, 0.0, 0.15, 0.3, 0.6])),
+                      "cls": str(rng.choice(["Car"] * 6 + ["Van", "Pedestrian", "DontCare"]))})
+        d = []
+        for o in g:
+            if rng.random() < 0.8:
+                box = np.array(o["box"]) + np.r_[rng.normal(0, 0.2, 3), rng.normal(0, 0.1, 3), rng.normal(0, 0.1)]
+                bb = np.array(o["bbox"]) + rng.normal(0, 2, 4)
+                d.append({"box": box.tolist(), "bbox": bb.tolist(), "score": float(rng.random()),
+                          "cls": str(rng.choice(["Car"] * 5 + ["Pedestrian"]))})
+        for _ in range(rng.integers(0, 3)):
+            top = rng.uniform(0, 100)
+            d.append({"box": _car(rng.uniform(5, 40), rng.uniform(-8, 8)), "score": float(rng.random()),
+                      "bbox": [200, top, 260, top + rng.choice([20, 30, 50])]})
+        frames.append((g, d))
+    return frames
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_vectorised_matches_loop_transliteration(seed):
+    rng = np.random.default_rng(seed)
+    gts, dets = _scene(_random_scene(rng, 80))
+    res = K.evaluate(gts, dets, metrics=("2d", "bev", "3d"), iou_thresholds={"Car": (0.7, 0.5)})
+    checked = 0
+    for metric in ("2d", "bev", "3d"):
+        for d, name in enumerate(K.DIFFICULTIES):
+            for thr in (0.7, 0.5):
+                r11, r40 = _devkit_ap(gts, dets, "Car", d, metric, thr)
+                key = f"Car_{metric}_{thr:g}/{name}"
+                assert res[f"{key}_R11"] == pytest.approx(r11, abs=1e-9), key
+                assert res[f"{key}_R40"] == pytest.approx(r40, abs=1e-9), key
+                checked += r40 > 0
+    assert checked >= 12        # the random scene is not degenerate

@@ -1,0 +1,227 @@
+"""Table registry, paper values, Kendall's tau, claim checks, table writer and scorecard."""
+from __future__ import annotations
+
+import json
+import math
+
+import pandas as pd
+import pytest
+
+from redsup import tables
+from redsup.tables import (evaluate_claims, kendall_tau, load_registry, paper_table, paper_values,
+                           write_scorecard, write_table)
+from redsup.tables.claims import _tau_b
+
+PROMISED = (
+    ["data_summary", "mccraith_ch3_table1", "mccraith_ch3_table2", "mccraith_ch3_fig3", "mccraith_ch3_fig6"]
+    + [f"mccraith_ch4_table{i}" for i in range(1, 8)] + ["mccraith_ch4_fig4", "mccraith_ch4_fig5"]
+    + ["mccraith_ch5_fig1"] + [f"mccraith_ch5_table{i}" for i in range(1, 5)]
+    + [f"mccraith_ch6_table{i}" for i in range(1, 5)] + [f"mccraith_ch7_table{i}" for i in range(1, 4)]
+    + ["galteland_table4_4", "galteland_table5_1"]
+)
+
+
+# ------------------------------------------------------------------------------------ Kendall tau
+def test_kendall_tau_hand_cases():
+    assert kendall_tau([1, 2, 3, 4], [10, 20, 30, 40]) == pytest.approx(1.0)
+    assert kendall_tau([1, 2, 3, 4], [4, 3, 2, 1]) == pytest.approx(-1.0)
+    # one tie in `ours`: pairs (C, D, ties_x, ties_y) = (5, 0, 1, 0) -> 5 / sqrt(6 * 5)
+    assert kendall_tau([1, 2, 2, 3], [1, 2, 3, 4]) == pytest.approx(5 / math.sqrt(30))
+    # one swap among four: (5 - 1) / 6
+    assert kendall_tau([1, 2, 3, 4], [1, 3, 2, 4]) == pytest.approx(4 / 6)
+    assert math.isnan(kendall_tau([1], [1]))
+    assert math.isnan(kendall_tau([1, 1, 1], [1, 2, 3]))  # undefined: one side constant
+
+
+def test_tau_b_fallback_matches_scipy():
+    x, y = [0.1, 0.3, 0.3, 0.2, 0.5, 0.4], [1, 3, 2, 2, 6, 5]
+    assert _tau_b(x, y) == pytest.approx(kendall_tau(x, y))
+
+
+# ------------------------------------------------------------------------------- registry + data
+def test_registry_promises_every_table():
+    reg = load_registry()
+    assert list(reg["tables"]) == PROMISED
+    for table_id, entry in reg["tables"].items():
+        assert entry["stage"] in tables.STAGES and entry["stage"] in reg["stages"], table_id
+        for key in ("title", "description", "kind"):
+            assert isinstance(entry[key], str) and entry[key].strip(), (table_id, key)
+        assert "\n" not in entry["description"]
+        assert entry["kind"] in ("table", "figure")
+        if entry.get("source"):
+            assert entry["source"]["document"] in reg["documents"]
+
+
+def test_paper_values_cover_registry():
+    reg = load_registry()
+    pv = paper_values()
+    assert list(pv.columns) == ["table_id", "row", "column", "value", "value_text", "unit", "lower_is_better", "note"]
+    assert set(pv["table_id"]) <= set(reg["tables"]), "paper_values.csv names an unknown table id"
+    for table_id in reg["tables"]:
+        n = int((pv["table_id"] == table_id).sum())
+        assert (n == 0) if table_id == "data_summary" else (n > 0), table_id
+    assert set(pv["lower_is_better"].unique()) <= {0, 1}
+    assert not pv.duplicated(["table_id", "row", "column"]).any()
+    # every cell is a number, or empty with a note saying why
+    empty = pv[pv["value"].isna()]
+    assert (empty["note"].str.len() > 0).all()
+    # one direction per (table, column)
+    assert (pv.groupby(["table_id", "column"])["lower_is_better"].nunique() == 1).all()
+
+
+def test_paper_values_spot_checks():
+    t = paper_table("mccraith_ch3_table2")
+    assert t.at["Ours (MLP-synthetic)", "E_v"] == 1.28 and t.at["geometric reprojection", "E_v^far"] == 23.60
+    assert paper_table("mccraith_ch4_table1").at["Depth Encoder + Pose Encoder", "Abs Rel"] == 0.097
+    assert paper_table("mccraith_ch4_table3").at["100", "Seconds per Image"] == 4.626
+    assert paper_table("mccraith_ch6_table3").at["(d) Ours", "AP_3D Easy"] == 83.45
+    assert math.isnan(paper_table("mccraith_ch6_table3").at["(b) Zakharov et al. [44]", "AP_BEV Hard"])
+    assert paper_table("mccraith_ch7_table3").at["2", "AP_BEV Medium"] == 74.79
+    assert paper_table("galteland_table5_1").at["Manydepth | NAP-lab | DDAD", "Abs Rel"] == 0.280
+    assert paper_table("galteland_table5_1", text=True).at["Feature Depth | DDAD | DDAD", "RMSE"] == "9.4300"
+
+
+def test_every_claim_check_is_well_formed():
+    """Each check names known rows/metrics of the paper table (or is explicitly about our own metric)
+    and the registry claims evaluate on the paper's own numbers without error."""
+    reg = load_registry()
+    for table_id, entry in reg["tables"].items():
+        results = tables.evaluate_claims_on_paper(table_id)
+        assert len(results) == len(entry["claims"])
+        for claim in entry["claims"]:
+            assert claim["text"].strip()
+            checks = claim.get("check") or []
+            for check in checks if isinstance(checks, list) else [checks]:
+                assert check["type"] in tables.registry.CHECK_TYPES, (table_id, check)
+
+
+def test_claims_on_paper_numbers():
+    """The transcribed numbers support the thesis' claims, except the two it contradicts itself on."""
+    contradicted = {("mccraith_ch6_table2", "64 bins is the optimal number of discrete rotations"),
+                    ("mccraith_ch7_table2", "The best parameter values are α = 5 and β = 0")}
+    failed = set()
+    for table_id in load_registry()["tables"]:
+        for c in tables.evaluate_claims_on_paper(table_id):
+            if c["holds"] is False:
+                failed.add((table_id, c["text"]))
+    assert failed == contradicted
+
+
+def test_label_matching():
+    assert tables.row_key("10^-1") == tables.row_key("0.1") == tables.row_key(0.1) == tables.row_key("1e-1")
+    assert tables.row_key("Ours (MLP-tracker)") == tables.row_key("ours  (mlp-tracker)")
+    assert tables.column_key("abs_rel") == tables.column_key("Abs Rel")
+    assert tables.column_key("a1") == tables.column_key("δ < 1.25") == tables.column_key("delta < 1.25^1")
+
+
+# --------------------------------------------------------------------------------------- writer
+@pytest.fixture()
+def ours_ch4_table2():
+    # learning-rate ablation, labels spelled differently from the paper on purpose
+    return pd.DataFrame({"row": ["baseline", "0.1", "10", "0.5"],
+                         "abs_rel": [0.1201, 0.1003, 0.30, 0.2],
+                         "a1": [0.85, 0.88, 0.5, 0.6]})
+
+
+def test_write_table_places_paper_beside_ours(tmp_path, ours_ch4_table2):
+    md, csv, tex = tmp_path / "t.md", tmp_path / "t.csv", tmp_path / "t.tex"
+    score = write_table("mccraith_ch4_table2", ours_ch4_table2, md, csv, tex, note="profile tiny")
+
+    df = pd.read_csv(csv, dtype=str, keep_default_na=False).set_index("row")
+    assert {"Abs Rel (ours)", "Abs Rel (paper)", "δ < 1.25 (ours)", "δ < 1.25 (paper)", "RMSE (paper)",
+            "status"} <= set(df.columns)
+    assert "RMSE (ours)" not in df.columns
+    assert df.at["10^-1", "Abs Rel (ours)"] == "0.1003" and df.at["10^-1", "Abs Rel (paper)"] == "0.097"
+    assert df.at["10", "δ < 1.25 (paper)"] == "0.314"
+    assert df.at["10^-5", "Abs Rel (ours)"] == "" and df.at["10^-5", "status"].startswith("paper only")
+    assert df.at["0.5", "status"] == "ours only"
+    assert list(df.index[:8]) == list(paper_table("mccraith_ch4_table2").index)  # paper order first
+
+    text = md.read_text()
+    assert text.startswith("# Instance adaptation learning rate")
+    assert "| 10^-1 | 0.100 | 0.097 |" in text  # ours at the paper's precision, paper as printed
+    assert "| 10^-5 | — | 0.115 |" in text
+    assert "profile tiny" in text
+    assert "Kendall τ" in text and "(n = 3 rows)" in text
+    assert "✔ Learning rate 0.1 gives the most significant improvement" in text
+    assert "n/a Too low a learning rate" in text
+
+    latex = tex.read_text()
+    assert "\\begin{tabular}" in latex and "\\caption{" in latex and "\\label{tab:mccraith_ch4_table2}" in latex
+    assert "10\\textsuperscript{-1} & 0.100 & 0.097" in latex
+    assert "$\\delta$ $<$ 1.25 (ours)" in latex
+
+    saved = json.loads((tmp_path / "mccraith_ch4_table2.score.json").read_text())
+    assert saved == json.loads(json.dumps(score, ensure_ascii=False, default=str))
+    assert saved["kendall_tau"] == pytest.approx(1.0) and saved["n_rows"] == 3
+    assert saved["claims_total"] == 3 and saved["claims_evaluated"] == 2 and saved["claims_held"] == 2
+
+
+def test_claims_hold_and_fail(ours_ch4_table2):
+    good = {c["text"]: c for c in evaluate_claims("mccraith_ch4_table2", ours_ch4_table2)}
+    best = good["Learning rate 0.1 gives the most significant improvement"]
+    assert best["holds"] is True and "10^-1 0.1003" in best["evidence"]
+    diverge = good["Too high a learning rate results in quick divergence"]
+    assert diverge["holds"] is True and "0.1201 < 10 0.3" in diverge["evidence"]
+
+    bad = ours_ch4_table2.copy()
+    bad.loc[bad["row"] == "0.1", "abs_rel"] = 0.15  # worse than the baseline: 0.1 no longer best
+    bad.loc[bad["row"] == "10", "abs_rel"] = 0.11  # high LR now better than the baseline
+    res = {c["text"]: c for c in evaluate_claims("mccraith_ch4_table2", bad)}
+    assert res["Learning rate 0.1 gives the most significant improvement"]["holds"] is False
+    assert "best of 4 rows is 10 0.11" in res["Learning rate 0.1 gives the most significant improvement"]["evidence"]
+    assert res["Too high a learning rate results in quick divergence"]["holds"] is False
+
+
+def test_check_types_and_extra_claims():
+    ours = pd.DataFrame({"AP_BEV Easy": [80.0, 70.0, 79.0], "AP_BEV Moderate": [75.0, 60.0, 74.5]},
+                        index=["(e) 2D Mask, outlier-aware, multi-view", "(b) 2D Mask", "(c) 2D Mask, multi-view"])
+    extra = [
+        {"text": "close", "check": {"type": "close", "a": "(c) 2D Mask, multi-view",
+                                    "b": "(e) 2D Mask, outlier-aware, multi-view", "tol": 1.0}},
+        {"text": "relative close fails", "check": {"type": "close", "a": "(b) 2D Mask",
+                                                   "b": "(c) 2D Mask, multi-view", "tol": 0.1, "relative": True}},
+        {"text": "range", "check": {"type": "range", "row": "(b) 2D Mask", "metric": "AP_BEV Easy", "min": 60, "max": 75}},
+        {"text": "worst", "check": {"type": "best", "row": "(b) 2D Mask", "worst": True}},
+        {"text": "two metrics", "check": {"type": "order", "better": "(e) 2D Mask, outlier-aware, multi-view",
+                                          "worse": "(b) 2D Mask", "metric": ["AP_BEV Easy", "AP_BEV Moderate"]}},
+        {"text": "cells", "check": {"type": "order", "better": {"row": "(b) 2D Mask", "metric": "AP_BEV Easy"},
+                                    "worse": {"row": "(b) 2D Mask", "metric": "AP_BEV Moderate"}}},
+        {"text": "pre-evaluated", "holds": False, "evidence": "computed by the caller"},
+    ]
+    res = {c["text"]: c["holds"] for c in evaluate_claims("mccraith_ch6_table1", ours, extra_claims=extra)}
+    assert res == {
+        "Masking LiDAR points with the 2D mask is a substantial improvement over the 2D box": None,  # no (a)
+        "Multi-view consistency alone gives no noticeable benefit": False,  # |74.5 - 60| > 1.5
+        "Discounting outliers with the probabilistic loss increases accuracy substantially": None,  # no (d)
+        "With outlier discounting, multi-view consistency helps and the full model is best": None,  # no (d), best ok
+        "close": True, "relative close fails": False, "range": True, "worst": True, "two metrics": True,
+        "cells": True, "pre-evaluated": False,
+    }
+
+
+def test_table_without_paper_values_and_scorecard(tmp_path, ours_ch4_table2):
+    summary = pd.DataFrame({"dataset": ["world_kitti"], "frames": [120], "cameras": ["cam_front, cam_back"]})
+    s1 = write_table("data_summary", summary, tmp_path / "d.md", tmp_path / "d.csv", tmp_path / "d.tex")
+    assert s1["kendall_tau"] is None and s1["claims"] == [] and not s1["has_paper"]
+    assert "| dataset | frames | cameras |" in (tmp_path / "d.md").read_text()
+    assert pd.read_csv(tmp_path / "d.csv").columns.tolist() == ["dataset", "frames", "cameras"]
+    write_table("mccraith_ch4_table2", ours_ch4_table2, tmp_path / "t.md", tmp_path / "t.csv", tmp_path / "t.tex")
+
+    out = tmp_path / "scorecard.md"
+    result = write_scorecard([tmp_path / "mccraith_ch4_table2.score.json", tmp_path / "data_summary.score.json"], out)
+    text = out.read_text()
+    assert result["tables"] == 2 and result["claims_held"] == 2 and result["claims_evaluated"] == 2
+    assert "| mccraith_ch4_table2 | depth | Abs Rel | +1.000 (3) | 2 / 2 / 3 | 3 / 3 |" in text
+    assert "| data_summary | data | — | n/a (0) | 0 / 0 / 0 | — |" in text
+    assert text.index("data_summary |") < text.index("mccraith_ch4_table2 |")  # registry order
+    assert "Not built: mccraith_ch3_table1" in text
+    assert "- ✔ Learning rate 0.1 gives the most significant improvement" in text
+
+
+def test_mlflow_plan():
+    plan = tables.mlflow_plan()
+    names = [p["name"] for p in plan["parents"]]
+    assert names[:2] == ["world", "data_preparation"] and set(PROMISED) <= set(names)
+    assert len(names) == len(set(names))
+    assert all(p["stage"] in plan["stages"] for p in plan["parents"])

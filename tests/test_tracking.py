@@ -1,0 +1,318 @@
+"""MLflow tracking layer: store initialisation, parent/child runs, FAILED / KILLED endings, and an
+end-to-end check through a real `mlflow server` REST API on loopback."""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import textwrap
+import time
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("mlflow")
+
+from redsup import tracking  # noqa: E402
+
+WORKFLOW_DIR = Path(tracking.__file__).resolve().parents[1]
+PLAN = {
+    "stages": {"data": "data stage", "velocity": "ch. 3", "depth": "ch. 4"},
+    "parents": [
+        {"name": "data_preparation", "stage": "data", "description": "prep"},
+        {"name": "mccraith_ch3_table1", "stage": "velocity"},
+        {"name": "mccraith_ch4_table2", "stage": "depth"},
+    ],
+}
+CONFIG = {"profile": "tiny", "seed": 1, "mlflow": {"tracking_uri": "x"}, "nested": {"a": [1, 2]}}
+QUIET_ENV = {"MLFLOW_DISABLE_TELEMETRY": "true", "DO_NOT_TRACK": "true"}
+
+
+def _client(uri):
+    from mlflow.tracking import MlflowClient
+
+    return MlflowClient(tracking_uri=uri)
+
+
+@pytest.fixture(scope="module")
+def store(tmp_path_factory):
+    """One store for the module: init, a finished child with curves/figure/table, a failed child, a
+    child killed by SIGTERM in a subprocess, a results table logged on a parent."""
+    root = tmp_path_factory.mktemp("mlflow")
+    old_cwd, old_env = os.getcwd(), {k: os.environ.get(k) for k in QUIET_ENV}
+    os.chdir(root)  # default-relative paths (results/...) land in the temp folder
+    os.environ.update(QUIET_ENV)
+    try:
+        uri = f"sqlite:///{root}/results/mlflow.db"
+        registry_json = root / "results" / "mlflow" / "registry.json"
+        first = tracking.init_store(uri, PLAN, registry_json)
+        second = tracking.init_store(uri, PLAN, registry_json)  # idempotent
+
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+        import pandas as pd
+
+        with tracking.child_run(registry_json, "mccraith_ch4_table2", "lr=0.1", rule="depth_adapt",
+                                wildcards={"lr": "0.1"}, config=CONFIG,
+                                params={"lr": 0.1, "steps": 10, "model": {"encoder": "resnet18"}}) as run:
+            for step, loss in enumerate([1.0, 0.5, 0.25]):
+                run.log_metric("loss", loss, step=step)
+            run.log_curve("abs_rel_curve", [0.2, 0.15, 0.1])
+            run.log_metrics({"abs_rel": 0.097, "a1": 0.904})
+            fig, ax = plt.subplots()
+            ax.plot([0, 1], [1, 0])
+            run.log_figure(fig, "curve")
+            plt.close(fig)
+            run.log_table(pd.DataFrame({"x": [1, 2]}), "values")
+            ok_id = run.run_id
+
+        failed_id = {}
+        with pytest.raises(ValueError, match="boom"):
+            with tracking.child_run(registry_json, "mccraith_ch3_table1", "broken", rule="r",
+                                    wildcards={}, config=CONFIG) as run:
+                failed_id["id"] = run.run_id
+                raise ValueError("boom")
+
+        killed = _run_killed_child(root, registry_json)
+        table = root / "t.md"
+        table.write_text("| a |\n|---|\n| 1 |\n")
+        tracking.log_table_artifacts(registry_json, "mccraith_ch4_table2", [table], metrics={"kendall_tau": 0.5})
+        yield {"root": root, "uri": uri, "registry_json": registry_json, "first": first, "second": second,
+               "ok_id": ok_id, "failed_id": failed_id["id"], "killed": killed}
+    finally:
+        os.chdir(old_cwd)
+        for k, v in old_env.items():
+            if v is None:
+                os.environ.pop(k, None)
+            else:
+                os.environ[k] = v
+
+
+def _run_killed_child(root: Path, registry_json: Path) -> dict:
+    """A child job in a subprocess, sent SIGTERM while inside child_run."""
+    ready = root / "ready.txt"
+    script = textwrap.dedent(f"""
+        import time
+        from pathlib import Path
+        from redsup import tracking
+        with tracking.child_run({str(registry_json)!r}, "mccraith_ch3_table1", "slow", rule="slow",
+                                wildcards={{"i": 1}}, config={{"profile": "tiny"}}) as run:
+            run.log_metric("progress", 1.0)
+            Path({str(ready)!r}).write_text(run.run_id)
+            time.sleep(120)
+    """)
+    env = {**os.environ, **QUIET_ENV,
+           "PYTHONPATH": os.pathsep.join([str(WORKFLOW_DIR), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen([sys.executable, "-c", script], cwd=root, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 90
+        while not ready.exists():
+            if proc.poll() is not None or time.monotonic() > deadline:
+                raise AssertionError(f"child never got ready:\n{proc.communicate()[0]}")
+            time.sleep(0.1)
+        proc.send_signal(signal.SIGTERM)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    return {"run_id": ready.read_text(), "returncode": proc.returncode, "output": out}
+
+
+# ----------------------------------------------------------------------------------------- tests
+def test_resolve_tracking_uri(monkeypatch):
+    monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
+    assert tracking.resolve_tracking_uri(None) == "sqlite:///results/mlflow.db"
+    assert tracking.resolve_tracking_uri("sqlite:///x.db") == "sqlite:///x.db"
+    monkeypatch.setenv("MLFLOW_TRACKING_URI", "http://127.0.0.1:5000")
+    assert tracking.resolve_tracking_uri("sqlite:///x.db") == "http://127.0.0.1:5000"
+
+
+def test_flatten_params():
+    flat = tracking.flatten_params({"a": 1, "b": {"c": "x", "d": [1, 2]}, "e": {}})
+    assert flat == {"a": "1", "b.c": "x", "b.d": "[1, 2]", "e": "{}"}
+
+
+def test_registry_json_and_idempotent_init(store):
+    reg = json.loads(store["registry_json"].read_text())
+    assert reg["tracking_uri"] == store["uri"]
+    assert set(reg["experiments"]) == set(PLAN["stages"])
+    assert set(reg["parents"]) == {p["name"] for p in PLAN["parents"]}
+    assert store["second"]["experiments"] == store["first"]["experiments"]
+    assert store["second"]["parents"] == store["first"]["parents"]
+
+
+def test_experiments_and_parents(store):
+    client = _client(store["uri"])
+    reg = store["first"]
+    for stage, exp_id in reg["experiments"].items():
+        exp = client.get_experiment(exp_id)
+        assert exp.name == f"redsup/{stage}"
+        assert Path(exp.artifact_location) == store["root"] / "results" / "mlartifacts" / stage
+    for p in PLAN["parents"]:
+        run = client.get_run(reg["parents"][p["name"]])
+        assert run.info.status == "FINISHED"
+        assert run.info.experiment_id == reg["experiments"][p["stage"]]
+        assert run.data.tags["redsup.role"] == "parent"
+        assert run.info.run_name == p["name"]
+    # exactly one parent per name even after the second init
+    runs = client.search_runs(list(reg["experiments"].values()), "tags.`redsup.role` = 'parent'")
+    assert sorted(r.info.run_name for r in runs) == sorted(p["name"] for p in PLAN["parents"])
+
+
+def test_finished_child_params_metrics_steps_artifacts(store):
+    client = _client(store["uri"])
+    reg = store["first"]
+    run = client.get_run(store["ok_id"])
+    assert run.info.status == "FINISHED"
+    assert run.info.experiment_id == reg["experiments"]["depth"]
+    tags = run.data.tags
+    assert tags["mlflow.parentRunId"] == reg["parents"]["mccraith_ch4_table2"]
+    assert tags["redsup.rule"] == "depth_adapt"
+    assert tags["redsup.wildcard.lr"] == "0.1"
+    assert json.loads(tags["redsup.wildcards"]) == {"lr": "0.1"}
+    from redsup.config import config_hash
+
+    assert tags["redsup.config_hash"] == config_hash(CONFIG)
+    assert tags["redsup.profile"] == "tiny"
+    assert tags["redsup.git_commit"]  # a sha or "unknown"
+    assert run.data.params == {"lr": "0.1", "steps": "10", "model.encoder": "resnet18"}
+    assert run.data.metrics["abs_rel"] == pytest.approx(0.097)
+    history = client.get_metric_history(store["ok_id"], "loss")
+    assert [(m.step, m.value) for m in sorted(history, key=lambda m: m.step)] == [(0, 1.0), (1, 0.5), (2, 0.25)]
+    assert len(client.get_metric_history(store["ok_id"], "abs_rel_curve")) == 3
+    artifacts = {a.path for a in client.list_artifacts(store["ok_id"])}
+    assert {"config.yaml", "curve.png", "values.csv"} <= artifacts
+    import yaml
+
+    cfg = yaml.safe_load(Path(client.download_artifacts(store["ok_id"], "config.yaml", str(store["root"]))).read_text())
+    assert cfg == CONFIG
+
+
+def test_failed_child(store):
+    run = _client(store["uri"]).get_run(store["failed_id"])
+    assert run.info.status == "FAILED"
+    assert run.data.tags["mlflow.parentRunId"] == store["first"]["parents"]["mccraith_ch3_table1"]
+
+
+def test_sigterm_child_is_killed(store):
+    killed = store["killed"]
+    assert killed["returncode"] == 128 + signal.SIGTERM, killed["output"]
+    run = _client(store["uri"]).get_run(killed["run_id"])
+    assert run.info.status == "KILLED"
+    assert run.data.metrics["progress"] == 1.0
+
+
+def test_no_run_left_running(store):
+    client = _client(store["uri"])
+    runs = client.search_runs(list(store["first"]["experiments"].values()))
+    assert runs and all(r.info.status != "RUNNING" for r in runs)
+
+
+def test_table_artifacts_on_finished_parent(store):
+    client = _client(store["uri"])
+    parent = store["first"]["parents"]["mccraith_ch4_table2"]
+    assert {a.path for a in client.list_artifacts(parent, "table")} == {"table/t.md"}
+    assert client.get_run(parent).data.metrics["kendall_tau"] == 0.5
+
+
+def test_unknown_parent(store):
+    with pytest.raises(KeyError, match="no parent run named"):
+        with tracking.child_run(store["registry_json"], "nope", "x", rule="r", wildcards={}, config={}):
+            pass
+
+
+def test_plan_validation(tmp_path):
+    with pytest.raises(ValueError, match="unknown stage"):
+        tracking.init_store(f"sqlite:///{tmp_path}/x.db", {"stages": {}, "parents": [{"name": "a", "stage": "b"}]},
+                            tmp_path / "r.json")
+    with pytest.raises(ValueError, match="duplicate"):
+        tracking.init_store(f"sqlite:///{tmp_path}/x.db",
+                            {"stages": {"s": ""}, "parents": [{"name": "a", "stage": "s"}] * 2}, tmp_path / "r.json")
+
+
+# ------------------------------------------------------------------------------- server (REST)
+def _free_port() -> int:
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _mlflow_cli() -> str | None:
+    beside = Path(sys.executable).with_name("mlflow")
+    return str(beside) if beside.exists() else shutil.which("mlflow")
+
+
+def _get(url: str) -> dict:
+    with urllib.request.urlopen(url, timeout=10) as resp:
+        return json.loads(resp.read())
+
+
+def _post(url: str, body: dict) -> dict:
+    req = urllib.request.Request(url, data=json.dumps(body).encode(), method="POST",
+                                 headers={"Content-Type": "application/json"})
+    with urllib.request.urlopen(req, timeout=10) as resp:
+        return json.loads(resp.read())
+
+
+def test_mlflow_server_rest_api(store, tmp_path):
+    cli = _mlflow_cli()
+    if cli is None:
+        pytest.skip("the mlflow command-line tool is not installed")
+    port = _free_port()
+    base = f"http://127.0.0.1:{port}"
+    log = (tmp_path / "server.log").open("w")
+    proc = subprocess.Popen(
+        [cli, "server", "--backend-store-uri", store["uri"], "--host", "127.0.0.1", "--port", str(port),
+         "--workers", "1", "--default-artifact-root", str(tmp_path / "server-artifacts")],
+        cwd=tmp_path, env={**os.environ, **QUIET_ENV}, stdout=log, stderr=subprocess.STDOUT,
+        start_new_session=True)  # own process group: the server forks a uvicorn worker
+    try:
+        deadline = time.monotonic() + 120
+        while True:
+            if proc.poll() is not None:
+                raise AssertionError(f"mlflow server exited:\n{(tmp_path / 'server.log').read_text()}")
+            try:
+                with urllib.request.urlopen(f"{base}/health", timeout=2) as resp:
+                    if resp.status == 200:
+                        break
+            except OSError:
+                pass
+            if time.monotonic() > deadline:
+                raise AssertionError(f"mlflow server not up in 120 s:\n{(tmp_path / 'server.log').read_text()}")
+            time.sleep(0.5)
+
+        exps = _get(f"{base}/api/2.0/mlflow/experiments/search?max_results=100")["experiments"]
+        by_name = {e["name"]: e["experiment_id"] for e in exps}
+        assert {f"redsup/{s}" for s in PLAN["stages"]} <= set(by_name)
+        runs = _post(f"{base}/api/2.0/mlflow/runs/search",
+                     {"experiment_ids": list(store["first"]["experiments"].values()), "max_results": 1000})["runs"]
+        by_id = {r["info"]["run_id"]: r for r in runs}
+        parents = store["first"]["parents"]
+        assert set(parents.values()) <= set(by_id)
+        tags = {rid: {t["key"]: t["value"] for t in r["data"].get("tags", [])} for rid, r in by_id.items()}
+        assert tags[store["ok_id"]]["mlflow.parentRunId"] == parents["mccraith_ch4_table2"]
+        assert by_id[store["ok_id"]]["info"]["status"] == "FINISHED"
+        assert by_id[store["failed_id"]]["info"]["status"] == "FAILED"
+        assert by_id[store["killed"]["run_id"]]["info"]["status"] == "KILLED"
+        children = [rid for rid, t in tags.items() if t.get("redsup.role") == "child"]
+        assert len(children) == 3
+        params = {p["key"]: p["value"] for p in by_id[store["ok_id"]]["data"].get("params", [])}
+        assert params["lr"] == "0.1"
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGTERM)
+            try:
+                proc.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                os.killpg(proc.pid, signal.SIGKILL)
+                proc.wait()
+        log.close()

@@ -1,0 +1,13 @@
+"""Self-supervised monocular depth (Monodepth2-style), test-time instance adaptation and road-plane calibration.
+
+Modules (each pure and small; import the one you need, nothing is re-exported here):
+
+- ``networks``    ResNet-18 encoder (hand-written, random init), U-Net depth decoder, pose decoder, ``disp_to_depth``
+- ``warping``     back-projection, projection, axis-angle poses, bilinear warping with ``grid_sample``
+- ``losses``      per-pixel SSIM / photometric error, minimum reprojection, auto-masking, edge-aware smoothness
+- ``pipeline``    the composition used by training and adaptation: predictions -> warps -> loss dict
+- ``evaluation``  the KITTI Eigen protocol (Garg crop, median scaling, the seven metrics), skipped-frame reasons
+- ``adaptation``  module-group selection (McCraith ch. 4 Table 1), frozen BatchNorm, SGD adaptation,
+                  instance-wise vs sequential, direct optimisation of the outputs
+- ``calibration`` road points, Least-Median-of-Squares plane fit, scale from the camera height (ch. 5) and baselines
+"""

@@ -1,0 +1,269 @@
+"""Average precision exactly as the KITTI object benchmark (devkit `evaluate_object.cpp` and its common
+python port), vectorised over frames and score thresholds.
+
+Per class, difficulty and metric (2d image box, bev, 3d), as in the devkit:
+
+- Ground truth of the class is valid; of the neighbouring class (Van for Car, Person_sitting for
+  Pedestrian) or of the class but outside the difficulty it is *ignored* (never a false negative, but a
+  detection matched to it is neither TP nor FP); anything else (including DontCare) is not considered.
+  Outside the difficulty means occlusion > max, truncation > max, or 2D height (y2 - y1) <= min height
+  (easy/moderate/hard: 40/25/25 px, occlusion 0/1/2, truncation 0.15/0.30/0.50). A non-finite 2D box
+  counts as height 0 (ignored at every difficulty).
+- Detections of the class with 2D height < min height are ignored; other classes are not considered.
+- Matching is greedy over ground truth in input order with a strict ``overlap > threshold``. Pass 1
+  (all detections): each ground truth takes the highest-scoring unassigned candidate; the scores of
+  valid matches are the TP scores. `thresholds` samples them at 41 recall points (devkit
+  `getThresholds`). Pass 2, per threshold (detections with score < threshold dropped): each ground truth
+  takes the unassigned valid detection of largest overlap, else the first ignored one; unassigned valid
+  detections are FP unless their overlap with a DontCare region (criterion 0: intersection over the
+  detection's own area/volume, same metric) exceeds the threshold.
+- precision[i] = TP / (TP + FP) at threshold i (i < 41), then made monotone with max over i..40;
+  R11 = mean of precision[0, 4, ..., 40], R40 = mean of precision[1..40], in percent.
+
+DontCare: the devkit measures a detection's overlap with a DontCare entry with the current metric, so for
+bev/3d it uses the DontCare's 3D box; KITTI's DontCare rows carry dummy 3D boxes, so in practice they only
+act in the 2d metric. Give DontCare rows NaN 3D boxes to get exactly that, or set
+`dontcare_2d_all_metrics=True` to apply the 2D DontCare rule to bev/3d as well (not the devkit).
+
+Like the devkit, AP needs many ground-truth objects: the i-th sampled threshold stands for recall i/40,
+so with fewer than 41 valid objects even perfect detections score below 100 (40 objects: 97.5).
+A class/difficulty without any valid ground truth gives NaN (the devkit divides by zero).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from redsup.det3d import boxes as box_ops
+
+DIFFICULTIES = ("easy", "moderate", "hard")
+MIN_HEIGHT = (40.0, 25.0, 25.0)
+MAX_OCCLUSION = (0, 1, 2)
+MAX_TRUNCATION = (0.15, 0.30, 0.50)
+N_SAMPLE_PTS = 41
+NEIGHBOUR_CLASS = {"car": "van", "pedestrian": "person_sitting"}
+METRICS = ("2d", "bev", "3d")
+
+
+@dataclass(frozen=True)
+class FrameGT:
+    """Ground truth of one frame: G objects, including DontCare rows (cls "DontCare")."""
+    boxes: np.ndarray        # (G, 7) x, y, z, l, w, h, yaw (vehicle frame); NaN rows allowed
+    bbox: np.ndarray         # (G, 4) x1, y1, x2, y2 image box in pixels
+    occlusion: np.ndarray    # (G,) KITTI level 0..3
+    truncation: np.ndarray   # (G,) 0..1
+    cls: np.ndarray          # (G,) class names, case-insensitive
+
+
+@dataclass(frozen=True)
+class FrameDet:
+    """Detections of one frame: D boxes with a 2D image box and a score."""
+    boxes: np.ndarray        # (D, 7)
+    bbox: np.ndarray         # (D, 4)
+    score: np.ndarray        # (D,)
+    cls: np.ndarray | None = field(default=None)   # (D,) class names; None = all "Car"
+
+
+def thresholds(scores: np.ndarray, n_gt: int, n_sample_pts: int = N_SAMPLE_PTS) -> np.ndarray:
+    """Devkit `getThresholds`: TP scores (descending) kept so that recall steps by 1/(n_sample_pts - 1)."""
+    v = np.sort(np.asarray(scores, dtype=np.float64))[::-1]
+    out = []
+    current = 0.0
+    for i, score in enumerate(v):
+        l_recall = (i + 1) / n_gt
+        r_recall = (i + 2) / n_gt if i < len(v) - 1 else l_recall
+        if (r_recall - current) < (current - l_recall) and i < len(v) - 1:
+            continue
+        out.append(score)
+        current += 1.0 / (n_sample_pts - 1.0)
+    return np.asarray(out[:n_sample_pts], dtype=np.float64)
+
+
+def _lower(names, n: int) -> np.ndarray:
+    if names is None:
+        return np.full(n, "car", dtype=object)
+    return np.array([str(s).lower() for s in names], dtype=object)
+
+
+def _pad(rows: list[np.ndarray], width: int, fill, dtype) -> np.ndarray:
+    out = np.full((len(rows), width), fill, dtype=dtype)
+    for f, r in enumerate(rows):
+        out[f, :len(r)] = r
+    return out
+
+
+def _frame_overlaps(gt: FrameGT, det: FrameDet, metric: str, criterion: int = -1) -> np.ndarray:
+    """(D, G) overlap of detections with ground-truth rows in one metric."""
+    if metric == "2d":
+        return box_ops.image_box_overlap(det.bbox, gt.bbox, criterion=criterion)
+    return box_ops.overlap_matrix(det.boxes, gt.boxes, kind=metric, criterion=criterion)
+
+
+@dataclass
+class _Prepared:
+    """Padded per-frame arrays for one class and difficulty (F frames, D dets, G gts)."""
+    ign_gt: np.ndarray       # (F, G) 0 valid, 1 ignored, -1 not considered / padding
+    ign_det: np.ndarray      # (F, D) 0 valid, 1 ignored (too small), -1 other class / padding
+    score: np.ndarray        # (F, D)
+    n_gt: int
+
+
+def _prepare(gts: list[FrameGT], dets: list[FrameDet], cls: str, difficulty: int, g_max: int,
+             d_max: int) -> _Prepared:
+    cls = cls.lower()
+    neighbour = NEIGHBOUR_CLASS.get(cls)
+    ign_gt_rows, ign_det_rows, score_rows = [], [], []
+    n_gt = 0
+    for gt, det in zip(gts, dets):
+        names = _lower(gt.cls, len(gt.cls))
+        bbox = np.asarray(gt.bbox, dtype=np.float64).reshape(-1, 4)
+        height = np.nan_to_num(bbox[:, 3] - bbox[:, 1], nan=0.0)
+        ignore = ((np.asarray(gt.occlusion) > MAX_OCCLUSION[difficulty])
+                  | (np.asarray(gt.truncation, dtype=np.float64) > MAX_TRUNCATION[difficulty])
+                  | (height <= MIN_HEIGHT[difficulty]))
+        valid_class = np.where(names == cls, 1, np.where(names == neighbour, 0, -1)) if neighbour \
+            else np.where(names == cls, 1, -1)
+        ig = np.full(len(names), -1, dtype=np.int8)
+        ig[(valid_class == 0) | ((valid_class == 1) & ignore)] = 1
+        ig[(valid_class == 1) & ~ignore] = 0
+        n_gt += int((ig == 0).sum())
+        ign_gt_rows.append(ig)
+
+        dbox = np.asarray(det.bbox, dtype=np.float64).reshape(-1, 4)
+        d_names = _lower(det.cls, len(dbox))
+        d_height = np.nan_to_num(np.abs(dbox[:, 3] - dbox[:, 1]), nan=0.0)
+        idt = np.where(d_height < MIN_HEIGHT[difficulty], 1, np.where(d_names == cls, 0, -1)).astype(np.int8)
+        ign_det_rows.append(idt)
+        score_rows.append(np.asarray(det.score, dtype=np.float64))
+    return _Prepared(_pad(ign_gt_rows, g_max, -1, np.int8), _pad(ign_det_rows, d_max, -1, np.int8),
+                     _pad(score_rows, d_max, -np.inf, np.float64), n_gt)
+
+
+def _first_pass(ov: np.ndarray, prep: _Prepared, min_overlap: float) -> np.ndarray:
+    """TP scores of the devkit's recall pass (compute_fp=False, threshold 0)."""
+    f_idx = np.arange(ov.shape[0])
+    assigned = np.zeros(prep.ign_det.shape, dtype=bool)
+    usable = prep.ign_det != -1
+    tp_scores = []
+    for g in range(ov.shape[2]):
+        active = prep.ign_gt[:, g] != -1
+        cand = usable & ~assigned & (ov[:, :, g] > min_overlap) & active[:, None]
+        has = cand.any(axis=1)
+        j = np.argmax(np.where(cand, prep.score, -np.inf), axis=1)
+        tp = has & (prep.ign_gt[:, g] == 0) & (prep.ign_det[f_idx, j] == 0)
+        tp_scores.append(prep.score[f_idx[tp], j[tp]])
+        assigned[f_idx[has], j[has]] = True
+    return np.concatenate(tp_scores) if tp_scores else np.zeros(0)
+
+
+def _second_pass(ov: np.ndarray, dc_ov: np.ndarray, prep: _Prepared, min_overlap: float,
+                 thr: np.ndarray, chunk_elems: int = 4_000_000) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(tp, fp, fn) per threshold (T,) of the devkit's precision pass (compute_fp=True)."""
+    n_f, n_d, n_g = ov.shape
+    n_t = len(thr)
+    tp = np.zeros(n_t, dtype=np.int64)
+    fp = np.zeros(n_t, dtype=np.int64)
+    fn = np.zeros(n_t, dtype=np.int64)
+    step = max(1, chunk_elems // max(1, n_t * max(n_d, 1)))
+    for s in range(0, n_f, step):
+        sl = slice(s, min(n_f, s + step))
+        o, ig_d, ig_g, sc = ov[sl], prep.ign_det[sl], prep.ign_gt[sl], prep.score[sl]
+        avail = (sc[:, None, :] >= thr[None, :, None]) & (ig_d != -1)[:, None, :]      # (f, T, D)
+        valid_det = (ig_d == 0)[:, None, :]
+        ignored_det = (ig_d == 1)[:, None, :]
+        assigned = np.zeros_like(avail)
+        for g in range(n_g):
+            active = (ig_g[:, g] != -1)[:, None, None]
+            cand = avail & ~assigned & (o[:, None, :, g] > min_overlap) & active
+            cand_v = cand & valid_det
+            cand_i = cand & ignored_det
+            has_v = cand_v.any(axis=2)
+            has_i = cand_i.any(axis=2)
+            jv = np.argmax(np.where(cand_v, o[:, None, :, g], -np.inf), axis=2)
+            ji = np.argmax(cand_i, axis=2)
+            j = np.where(has_v, jv, ji)
+            has = has_v | has_i
+            gt_valid = (ig_g[:, g] == 0)[:, None]
+            fn += ((~has) & gt_valid).sum(axis=0)
+            tp += (has_v & gt_valid).sum(axis=0)
+            ff, tt = np.nonzero(has)
+            assigned[ff, tt, j[ff, tt]] = True
+        free = avail & ~assigned & valid_det
+        in_dc = (dc_ov[sl] > min_overlap)[:, None, :]
+        fp += (free & ~in_dc).sum(axis=(0, 2))
+    return tp, fp, fn
+
+
+def _ap_from_counts(tp: np.ndarray, fp: np.ndarray) -> tuple[float, float]:
+    precision = np.zeros(N_SAMPLE_PTS)
+    n = min(len(tp), N_SAMPLE_PTS)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        precision[:n] = np.where(tp[:n] + fp[:n] > 0, tp[:n] / np.maximum(tp[:n] + fp[:n], 1), 0.0)
+    precision = np.maximum.accumulate(precision[::-1])[::-1]
+    r11 = precision[0::4].sum() / 11 * 100
+    r40 = precision[1:].sum() / 40 * 100
+    return float(r11), float(r40)
+
+
+def _check(gts: list[FrameGT], dets: list[FrameDet]) -> None:
+    if len(gts) != len(dets):
+        raise ValueError(f"{len(gts)} ground-truth frames but {len(dets)} detection frames")
+    for k, (gt, det) in enumerate(zip(gts, dets)):
+        g, d = len(gt.cls), len(det.score)
+        shapes = {"gt.boxes": (np.shape(gt.boxes), (g, 7)), "gt.bbox": (np.shape(gt.bbox), (g, 4)),
+                  "gt.occlusion": (np.shape(gt.occlusion), (g,)), "gt.truncation": (np.shape(gt.truncation), (g,)),
+                  "det.boxes": (np.shape(det.boxes), (d, 7)), "det.bbox": (np.shape(det.bbox), (d, 4))}
+        for name, (got, want) in shapes.items():
+            if got != want and not (got[:1] == (0,) and want[0] == 0):
+                raise ValueError(f"frame {k}: {name} has shape {got}, expected {want}")
+
+
+def evaluate(gts: list[FrameGT], dets: list[FrameDet], classes: tuple[str, ...] = ("Car",),
+             metrics: tuple[str, ...] = ("bev", "3d"),
+             iou_thresholds: dict[str, tuple[float, ...]] | None = None,
+             dontcare_2d_all_metrics: bool = False) -> dict[str, float]:
+    """KITTI AP for aligned per-frame ground truth and detections.
+
+    Returns a flat dict ``{f"{cls}_{metric}_{thr:g}/{difficulty}_{R11|R40}": AP in percent}``, e.g.
+    ``Car_bev_0.7/moderate_R40``. `iou_thresholds` maps class -> thresholds evaluated for every metric
+    (default Car: 0.7 and 0.5; the devkit's own "0.5" table keeps 0.7 for Car 2d, pass what you report).
+    """
+    _check(gts, dets)
+    iou_thresholds = iou_thresholds or {"Car": (0.7, 0.5)}
+    for m in metrics:
+        if m not in METRICS:
+            raise ValueError(f"unknown metric {m!r}; expected one of {METRICS}")
+    g_max = max([len(g.cls) for g in gts] + [1])
+    d_max = max([len(d.score) for d in dets] + [1])
+    n_f = len(gts)
+    results: dict[str, float] = {}
+    dc_rows = [np.flatnonzero(_lower(g.cls, len(g.cls)) == "dontcare") for g in gts]
+    for metric in metrics:
+        ov = np.zeros((n_f, d_max, g_max))
+        dc_ov = np.zeros((n_f, d_max))
+        for f, (gt, det) in enumerate(zip(gts, dets)):
+            if len(det.score) and len(gt.cls):
+                ov[f, :len(det.score), :len(gt.cls)] = _frame_overlaps(gt, det, metric)
+                if len(dc_rows[f]):
+                    dc_metric = "2d" if dontcare_2d_all_metrics else metric
+                    rows = dc_rows[f]
+                    dc_gt = FrameGT(np.asarray(gt.boxes).reshape(-1, 7)[rows], np.asarray(gt.bbox).reshape(-1, 4)[rows],
+                                    np.asarray(gt.occlusion)[rows], np.asarray(gt.truncation)[rows],
+                                    np.asarray(gt.cls)[rows])
+                    dc_ov[f, :len(det.score)] = _frame_overlaps(dc_gt, det, dc_metric, criterion=0).max(axis=1)
+        for cls in classes:
+            for difficulty, name in enumerate(DIFFICULTIES):
+                prep = _prepare(gts, dets, cls, difficulty, g_max, d_max)
+                for thr in iou_thresholds.get(cls, ()):
+                    key = f"{cls}_{metric}_{thr:g}/{name}"
+                    if prep.n_gt == 0:
+                        results[f"{key}_R11"] = results[f"{key}_R40"] = float("nan")
+                        continue
+                    scores = _first_pass(ov, prep, thr)
+                    t = thresholds(scores, prep.n_gt)
+                    tp, fp, _ = _second_pass(ov, dc_ov, prep, thr, t)
+                    r11, r40 = _ap_from_counts(tp, fp)
+                    results[f"{key}_R11"] = r11
+                    results[f"{key}_R40"] = r40
+    return results

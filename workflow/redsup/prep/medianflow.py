@@ -1,0 +1,151 @@
+"""MedianFlow 2D box tracks for the velocity clips (McCraith ch. 3 §III-B, §V: the tracker Xi).
+
+Each annotated vehicle's last-frame box initialises OpenCV contrib's MedianFlow, which is run backward
+through the clip; boxes are returned in forward time order. A failed update keeps the previous box and
+sets its `failed` flag (a failed initialisation flags every frame), so failures are visible downstream.
+
+`medianflow.npz` per clip split (N vehicles, T frames): clip (N,) int64, track_id (N,) int64, boxes
+(N, T, 4) float32 x, y, w, h, failed (N, T) bool, velocity (N, 2) [vx, vz], position (N, 2) [x, z],
+distance (N,) = position z, bin (N,) str near / medium / far, bin_index (N,) int8 (0, 1, 2).
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from redsup.fileio import save_npz_atomic
+from redsup.sceneio import SceneError
+
+BINS = ("near", "medium", "far")
+
+
+def distance_bin(z: float, near: float, far: float) -> int:
+    """0 near (z < near), 1 medium (near <= z < far), 2 far (z >= far)."""
+    return 0 if z < near else (1 if z < far else 2)
+
+
+def track_backward(frames: list[np.ndarray], box_xywh) -> tuple[np.ndarray, np.ndarray]:
+    """Track a box given in the last frame backward; ((T, 4) x, y, w, h in forward order, (T,) failed)."""
+    n = len(frames)
+    boxes = np.zeros((n, 4), dtype=np.float32)
+    failed = np.zeros(n, dtype=bool)
+    box = tuple(float(v) for v in box_xywh)
+    boxes[:] = box
+    tracker = cv2.legacy.TrackerMedianFlow_create()
+    try:
+        ok = tracker.init(frames[-1], box)
+    except cv2.error:
+        ok = False
+    if ok is False:
+        failed[:] = True
+        return boxes, failed
+    for t in range(n - 2, -1, -1):
+        try:
+            ok, new = tracker.update(frames[t])
+        except cv2.error:
+            ok, new = False, box
+        if ok and np.all(np.isfinite(new)) and new[2] > 0 and new[3] > 0:
+            box = tuple(float(v) for v in new)
+        else:
+            failed[t] = True
+        boxes[t] = box
+    return boxes, failed
+
+
+def _frame_paths(clip_dir: Path, n_frames: int) -> list[Path]:
+    paths = []
+    for k in range(1, n_frames + 1):
+        for ext in ("png", "jpg"):
+            path = clip_dir / "imgs" / f"{k:03d}.{ext}"
+            if path.exists():
+                paths.append(path)
+                break
+        else:
+            raise SceneError(f"{clip_dir / 'imgs'}: frame {k:03d}.png missing (a clip has {n_frames} frames)")
+    return paths
+
+
+def read_clip(clip_dir: str | Path, n_frames: int) -> tuple[list[np.ndarray], list[dict]]:
+    """(frames as BGR images, annotations) of one clip; SceneError naming the file on bad input."""
+    clip_dir = Path(clip_dir)
+    path = clip_dir / "annotation.json"
+    try:
+        annotations = json.loads(path.read_text())
+    except FileNotFoundError as exc:
+        raise SceneError(f"{path}: missing") from exc
+    except json.JSONDecodeError as exc:
+        raise SceneError(f"{path}: not valid JSON: {exc}") from exc
+    if not isinstance(annotations, list):
+        raise SceneError(f"{path}: expected a list of annotated vehicles")
+    for a in annotations:
+        if not all(k in a for k in ("bbox", "velocity", "position")) or \
+                not all(k in a["bbox"] for k in ("top", "left", "bottom", "right")):
+            raise SceneError(f"{path}: each entry needs bbox{{top, left, bottom, right}}, velocity, position")
+    frames = []
+    for p in _frame_paths(clip_dir, n_frames):
+        image = cv2.imread(str(p), cv2.IMREAD_COLOR)
+        if image is None:
+            raise SceneError(f"{p}: unreadable image")
+        frames.append(image)
+    if len({f.shape for f in frames}) != 1:
+        raise SceneError(f"{clip_dir / 'imgs'}: frames differ in size")
+    return frames, annotations
+
+
+def clip_dirs(split_dir: str | Path) -> list[Path]:
+    """Clip folders of a split, in numeric order; SceneError on a non-numeric name."""
+    root = Path(split_dir) / "clips"
+    if not root.is_dir():
+        raise SceneError(f"{root}: missing (a clip split holds clips/<n>/)")
+    dirs = [p for p in root.iterdir() if p.is_dir()]
+    bad = [p.name for p in dirs if not p.name.isdigit()]
+    if bad:
+        raise SceneError(f"{root}: clip folders must be numbered, found {bad[:5]}")
+    return sorted(dirs, key=lambda p: int(p.name))
+
+
+def track_split(split_dir: str | Path, medianflow_cfg: dict) -> tuple[dict, dict]:
+    """(arrays of medianflow.npz, summary numbers) for one clip split."""
+    n_frames = medianflow_cfg["n_frames"]
+    near, far = medianflow_cfg["near"], medianflow_cfg["far"]
+    cols = {k: [] for k in ("clip", "track_id", "boxes", "failed", "velocity", "position", "bin_index")}
+    for clip_dir in clip_dirs(split_dir):
+        frames, annotations = read_clip(clip_dir, n_frames)
+        for k, a in enumerate(annotations):
+            b = a["bbox"]
+            xywh = (b["left"], b["top"], b["right"] - b["left"], b["bottom"] - b["top"])
+            boxes, failed = track_backward(frames, xywh)
+            cols["clip"].append(int(clip_dir.name))
+            cols["track_id"].append(int(a.get("track_id", k)))
+            cols["boxes"].append(boxes)
+            cols["failed"].append(failed)
+            cols["velocity"].append(a["velocity"])
+            cols["position"].append(a["position"])
+            cols["bin_index"].append(distance_bin(float(a["position"][1]), near, far))
+    n = len(cols["clip"])
+    position = np.array(cols["position"], dtype=np.float64).reshape(n, 2)
+    bin_index = np.array(cols["bin_index"], dtype=np.int8)
+    failed = np.array(cols["failed"], dtype=bool).reshape(n, n_frames)
+    arrays = {
+        "clip": np.array(cols["clip"], dtype=np.int64), "track_id": np.array(cols["track_id"], dtype=np.int64),
+        "boxes": np.array(cols["boxes"], dtype=np.float32).reshape(n, n_frames, 4), "failed": failed,
+        "velocity": np.array(cols["velocity"], dtype=np.float64).reshape(n, 2), "position": position,
+        "distance": position[:, 1].copy(), "bin_index": bin_index,
+        "bin": np.array([BINS[i] for i in bin_index], dtype="<U6"),
+    }
+    summary = {"n_vehicles": n, "n_clips": len(set(cols["clip"])),
+               "failed_frame_fraction": float(failed.mean()) if n else 0.0,
+               "vehicles_with_failure": int(failed.any(axis=1).sum())}
+    for i, name in enumerate(BINS):
+        summary[f"n_{name}"] = int(np.count_nonzero(bin_index == i))
+    return arrays, summary
+
+
+def write_medianflow(split_dir: str | Path, out_path: str | Path, medianflow_cfg: dict) -> dict:
+    """Write `medianflow.npz` for one clip split; returns summary numbers."""
+    arrays, summary = track_split(split_dir, medianflow_cfg)
+    save_npz_atomic(out_path, **arrays)
+    return summary

@@ -1,0 +1,120 @@
+"""Hashed value noise and band-limited fractal noise, as pure functions of position.
+
+Textures are evaluated at surface points, so a point looks the same from every viewpoint. Octaves whose
+wavelength is below the pixel footprint fade to their mean (an analytic mip-map), which avoids aliasing
+flicker between frames while keeping every octave the resolution can show.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+_K1 = np.uint32(0x8DA6B343)
+_K2 = np.uint32(0xD8163841)
+_K4 = np.uint32(0x5BD1E995)
+
+
+def hash_u32(ix: np.ndarray, iy: np.ndarray, seed: int, iz: np.ndarray | None = None) -> np.ndarray:
+    """Integer lattice hash -> uint32 (wrapping arithmetic)."""
+    h = ix.astype(np.uint32) * _K1
+    h ^= iy.astype(np.uint32) * _K2
+    if iz is not None:
+        h ^= iz.astype(np.uint32) * _K4
+    h ^= np.uint32((int(seed) * 0x27D4EB2D * 0xCB1AB31F + 0x165667B1) & 0xFFFFFFFF)
+    h ^= h >> np.uint32(13)
+    h *= _K4
+    h ^= h >> np.uint32(15)
+    h *= _K1
+    h ^= h >> np.uint32(16)
+    return h
+
+
+def hash01(ix: np.ndarray, iy: np.ndarray, seed: int, iz: np.ndarray | None = None) -> np.ndarray:
+    """Integer lattice hash -> float32 uniform in [0, 1)."""
+    return (hash_u32(ix, iy, seed, iz) >> np.uint32(8)).astype(np.float32) * np.float32(1.0 / 16777216.0)
+
+
+def _fade(f: np.ndarray) -> np.ndarray:
+    return f * f * (3.0 - 2.0 * f)
+
+
+def value2(x: np.ndarray, y: np.ndarray, seed: int) -> np.ndarray:
+    """Smooth 2D value noise in [0, 1] with unit lattice spacing."""
+    xf, yf = np.floor(x), np.floor(y)
+    ix, iy = xf.astype(np.int64), yf.astype(np.int64)
+    ux, uy = _fade((x - xf).astype(np.float32)), _fade((y - yf).astype(np.float32))
+    a = hash01(ix, iy, seed)
+    b = hash01(ix + 1, iy, seed)
+    c = hash01(ix, iy + 1, seed)
+    d = hash01(ix + 1, iy + 1, seed)
+    return a + (b - a) * ux + (c - a) * uy + (a - b - c + d) * ux * uy
+
+
+def value3(x: np.ndarray, y: np.ndarray, z: np.ndarray, seed: int) -> np.ndarray:
+    """Smooth 3D value noise in [0, 1] with unit lattice spacing."""
+    xf, yf, zf = np.floor(x), np.floor(y), np.floor(z)
+    ix, iy, iz = xf.astype(np.int64), yf.astype(np.int64), zf.astype(np.int64)
+    ux, uy, uz = (_fade((v - f).astype(np.float32)) for v, f in ((x, xf), (y, yf), (z, zf)))
+    out = np.zeros(np.shape(x), dtype=np.float32)
+    for dz, wz in ((0, 1 - uz), (1, uz)):
+        lo = hash01(ix, iy, seed, iz + dz) * (1 - ux) + hash01(ix + 1, iy, seed, iz + dz) * ux
+        hi = hash01(ix, iy + 1, seed, iz + dz) * (1 - ux) + hash01(ix + 1, iy + 1, seed, iz + dz) * ux
+        out += (lo * (1 - uy) + hi * uy) * wz
+    return out
+
+
+def octave_weight(wavelength: float, footprint: np.ndarray) -> np.ndarray:
+    """1 where the wavelength spans >= 2 footprints, 0 below one footprint, linear between."""
+    return np.clip(wavelength / np.maximum(footprint, 1e-6) - 1.0, 0.0, 1.0).astype(np.float32)
+
+
+def fbm2(x: np.ndarray, y: np.ndarray, seed: int, base_wavelength: float, octaves: int,
+         footprint: np.ndarray, gain: float = 0.5) -> np.ndarray:
+    """Band-limited fractal noise in about [-1, 1]: octave i has wavelength base / 2^i."""
+    total = np.zeros(np.shape(x), dtype=np.float32)
+    norm = 0.0
+    amp = 1.0
+    lam = base_wavelength
+    for i in range(octaves):
+        w = octave_weight(lam, footprint)
+        if np.any(w > 0):
+            total += (amp * 2.0) * w * (value2(x / lam, y / lam, seed + 101 * i) - 0.5)
+        norm += amp
+        amp *= gain
+        lam *= 0.5
+    return total / np.float32(norm)
+
+
+def fbm3(x: np.ndarray, y: np.ndarray, z: np.ndarray, seed: int, base_wavelength: float, octaves: int,
+         footprint: np.ndarray, gain: float = 0.55) -> np.ndarray:
+    """Band-limited 3D fractal noise in about [-1, 1]."""
+    total = np.zeros(np.shape(x), dtype=np.float32)
+    norm = 0.0
+    amp = 1.0
+    lam = base_wavelength
+    for i in range(octaves):
+        w = octave_weight(lam, footprint)
+        if np.any(w > 0):
+            total += (amp * 2.0) * w * (value3(x / lam, y / lam, z / lam, seed + 131 * i) - 0.5)
+        norm += amp
+        amp *= gain
+        lam *= 0.5
+    return total / np.float32(norm)
+
+
+def stripe(coord: np.ndarray, lo: float | np.ndarray, hi: float | np.ndarray,
+           footprint: np.ndarray) -> np.ndarray:
+    """Anti-aliased coverage in [0, 1] of the interval [lo, hi] along `coord`."""
+    fp = np.maximum(footprint, 1e-4)
+    a = np.clip((coord - lo) / fp + 0.5, 0.0, 1.0)
+    b = np.clip((hi - coord) / fp + 0.5, 0.0, 1.0)
+    return np.minimum(a, b).astype(np.float32)
+
+
+def grid_lines(coord: np.ndarray, period: float, width: float, footprint: np.ndarray) -> np.ndarray:
+    """Coverage of thin lines of `width` every `period` (mortar, grout, seams), fading to their mean
+    density where the footprint exceeds the line width."""
+    d = np.abs(coord / period - np.round(coord / period)) * period
+    fp = np.maximum(footprint, 1e-4)
+    sharp = np.clip((0.5 * width - d) / fp + 0.5, 0.0, 1.0)
+    mix = np.clip(fp / period, 0.0, 1.0)
+    return ((1.0 - mix) * sharp + mix * (width / period)).astype(np.float32)

@@ -1,0 +1,155 @@
+"""Surface materials at ray hits, and camera images with their label, instance and depth buffers.
+
+Shading: fixed-sun Lambertian (ambient + diffuse), glass shown as its (dark, sky-tinted) reflection,
+distance haze towards the horizon colour, then the domain's photometric look (brightness, contrast,
+saturation, tint, gamma) and a little sensor noise.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import facades, textures
+from .prims import CAR_KINDS, KIND_BARRIER, KIND_BUILDING, KIND_CABIN, KIND_POLE, KIND_RAIL, KIND_TRUNK, Prims
+from .raycast import GROUND, cast
+from .road import PART_KERB, Road
+
+
+@dataclass
+class SceneView:
+    """What materials need besides the primitives: road, style and the entity tables."""
+    road: Road
+    style: textures.Style
+    cars: dict
+    buildings: dict
+
+
+def hit_geometry(points: np.ndarray, prim: np.ndarray, face: np.ndarray, prims: Prims, road: Road):
+    """Unit normals, box-local coordinates and box half extents at hit points."""
+    n = len(points)
+    normal = np.zeros((n, 3))
+    local = np.zeros((n, 3))
+    half = np.zeros((n, 3))
+    box = (prim >= 0) & (prim < prims.n_box)
+    if box.any():
+        b = prim[box]
+        R = prims.rot[b]
+        local[box] = np.einsum("nji,nj->ni", R, points[box] - prims.center[b])
+        half[box] = prims.half[b]
+        axis = face[box] // 2
+        sign = np.where(face[box] % 2 == 1, 1.0, -1.0)
+        normal[box] = R[np.arange(len(b)), :, axis] * sign[:, None]
+    sph = prim >= prims.n_box
+    if sph.any():
+        s = prim[sph] - prims.n_box
+        normal[sph] = (points[sph] - prims.sph_center[s]) / prims.sph_radius[s][:, None]
+        local[sph] = points[sph] - prims.sph_center[s]
+    gr = prim == GROUND
+    if gr.any():
+        normal[gr] = road.normal(points[gr, 0])
+        kerb = gr & (face == PART_KERB)
+        normal[kerb] = np.stack([np.zeros(kerb.sum()), -np.sign(points[kerb, 1]), np.zeros(kerb.sum())], axis=-1)
+    return normal, local, half
+
+
+def materials(points, prim, face, local, half, prims: Prims, view: SceneView, fp):
+    """(Surface, instance id) at hit points (prim >= 0 or GROUND)."""
+    n = len(points)
+    out = textures.surface(n)
+    inst = np.zeros(n, np.uint16)
+
+    def put(mask, surf):
+        out.albedo[mask], out.label[mask], out.reflect[mask], out.glass[mask] = (
+            surf.albedo, surf.label, surf.reflect, surf.glass)
+
+    gr = prim == GROUND
+    if gr.any():
+        put(gr, textures.ground(points[gr], face[gr], view.style, fp[gr]))
+    box = (prim >= 0) & (prim < prims.n_box)
+    kind = np.zeros(n, np.int16)
+    ent = np.zeros(n, np.int64)
+    kind[box] = prims.kind[prim[box]]
+    ent[box] = prims.ent[prim[box]]
+    car = box & np.isin(kind, CAR_KINDS)
+    if car.any():
+        b = prim[car]
+        p_car = local[car] + prims.offset[b]
+        put(car, facades.car(p_car, face[car], kind[car], ent[car], view.cars, view.style, fp[car],
+                             local[car], half[car]))
+        inst[car] = view.cars["track_id"][ent[car]]
+    bld = box & (kind == KIND_BUILDING)
+    if bld.any():
+        put(bld, facades.building(local[bld], face[bld], half[bld], ent[bld], view.buildings, view.style, fp[bld]))
+    pole = box & (kind == KIND_POLE)
+    if pole.any():
+        put(pole, textures.pole(points[pole], local[pole], view.style, fp[pole]))
+    tr = box & (kind == KIND_TRUNK)
+    if tr.any():
+        put(tr, textures.trunk(points[tr], view.style, fp[tr]))
+    for k, concrete in ((KIND_RAIL, False), (KIND_BARRIER, True)):
+        m = box & (kind == k)
+        if m.any():
+            put(m, textures.rail(points[m], local[m], view.style, fp[m], concrete))
+    sph = prim >= prims.n_box
+    if sph.any():
+        put(sph, textures.crown(points[sph], view.style, fp[sph]))
+    return out, inst
+
+
+def sun_vector(appearance: dict) -> np.ndarray:
+    az, el = np.radians(appearance["sun_azimuth_deg"]), np.radians(appearance["sun_elevation_deg"])
+    return np.array([np.cos(el) * np.cos(az), np.cos(el) * np.sin(az), np.sin(el)])
+
+
+def finish(col: np.ndarray, appearance: dict, pixel_noise: float, rng: np.random.Generator) -> np.ndarray:
+    """Domain look: exposure and tint, saturation, contrast about mid grey, gamma, noise -> uint8."""
+    col = col * appearance["brightness"] * np.asarray(appearance["tint"], dtype=np.float32)
+    lum = col @ np.array([0.299, 0.587, 0.114], np.float32)
+    col = lum[:, None] + (col - lum[:, None]) * appearance["saturation"]
+    col = (col - 0.45) * appearance["contrast"] + 0.45
+    col = np.clip(col, 0.0, 1.0) ** (1.0 / appearance["gamma"])
+    if pixel_noise > 0:
+        col = col + rng.normal(0.0, pixel_noise, col.shape).astype(np.float32)
+    return np.clip(np.round(col * 255.0), 0, 255).astype(np.uint8)
+
+
+def render_camera(cam, T_world_cam: np.ndarray, prims: Prims, view: SceneView, appearance: dict,
+                  shading: dict, render_distance: float, fog_distance: float, rng: np.random.Generator):
+    """Render one camera: dict(rgb (H,W,3) uint8, label uint8, instance uint16, depth float32 metres
+    (0 = none)), plus the casting results (hits, pairs) for ground-truth bookkeeping."""
+    hits, pairs, dirs = cast(cam, T_world_cam, prims, view.road, render_distance)
+    origin = T_world_cam[:3, 3]
+    n = cam.n_rays
+    ok = np.isfinite(hits.t)
+    idx = np.nonzero(ok)[0]
+    d = dirs[idx]
+    t = hits.t[idx]
+    pts = origin + d * t[:, None]
+    dn = np.linalg.norm(d, axis=1)
+    rng_dist = t * dn
+    normal, local, half = hit_geometry(pts, hits.prim[idx], hits.face[idx], prims, view.road)
+    cos_i = np.abs(np.sum(normal * d, axis=1)) / dn
+    # footprint: geometric mean of the two axes of the pixel's ellipse on the surface (anisotropic filter)
+    fp = rng_dist * cam.pixel_angle / np.sqrt(np.clip(cos_i, 0.05, 1.0))
+    surf, inst = materials(pts, hits.prim[idx], hits.face[idx], local, half, prims, view, fp)
+    amb = shading["ambient"]
+    light = amb + (1.0 - amb) * np.clip(normal @ sun_vector(appearance), 0.0, None)
+    light = np.where(surf.glass, 0.95, light).astype(np.float32)
+    col = surf.albedo * light[:, None]
+    fog = (1.0 - np.exp(-rng_dist / fog_distance)).astype(np.float32)
+    col = col + (view.style.sky_horizon[None, :] - col) * fog[:, None]
+    rgb = np.empty((n, 3), np.float32)
+    rgb[idx] = col
+    sky = np.nonzero(~ok)[0]
+    rgb[sky] = textures.sky(dirs[sky], view.style)
+    label = np.full(n, textures.SKY, np.uint8)
+    label[idx] = surf.label
+    instance = np.zeros(n, np.uint16)
+    instance[idx] = inst
+    depth = np.zeros(n, np.float32)
+    depth[idx] = t
+    H, W = cam.height, cam.width
+    return {"rgb": finish(rgb, appearance, shading["pixel_noise"], rng).reshape(H, W, 3),
+            "label": label.reshape(H, W), "instance": instance.reshape(H, W), "depth": depth.reshape(H, W),
+            "hits": hits, "pairs": pairs}
