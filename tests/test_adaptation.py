@@ -135,3 +135,16 @@ def test_direct_optimisation_of_outputs():
     stereo = {"target": sample["target"], "K": sample["K"], "sources": {"stereo": sample["sources"]["next"]},
               "transforms": {"stereo": warping.translation_transform(torch.tensor([[-0.1, 0.0, 0.0]]))}}
     assert set(pipeline.output_variables(models, stereo)) == {"disp_0", "disp_1", "disp_2", "disp_3"}
+
+
+def test_direct_optimisation_depth_only_keeps_pose():
+    models = _models().eval()
+    sample = _sample(4)
+    variables = pipeline.output_variables(models, sample)
+    loss_fn = functools.partial(pipeline.variables_loss, sample, noise_std=0.0)
+    free = [k for k in variables if k.startswith("disp_")]
+    optimised, _ = adaptation.direct_optimisation(variables, loss_fn, lr=10.0, steps=1, free=free)
+    assert torch.equal(optimised["translation_prev"], variables["translation_prev"])
+    assert not torch.equal(optimised["disp_0"], variables["disp_0"])
+    with pytest.raises(KeyError, match="nope"):
+        adaptation.direct_optimisation(variables, loss_fn, lr=1.0, steps=1, free=["nope"])

@@ -24,7 +24,8 @@ def test_ssim_constant_images_hand_value(a, b):
     assert torch.allclose(losses.ssim(x.float(), y.float()), torch.full_like(x, expected).float(), atol=2e-4)
     alpha = 0.85
     p = alpha * (1 - expected) / 2 + (1 - alpha) * abs(a - b)
-    assert torch.allclose(losses.photometric_error(x, y, alpha), torch.full((1, 1, 5, 5), p, dtype=torch.float64), atol=1e-10)
+    expected_p = torch.full((1, 1, 5, 5), p, dtype=torch.float64)
+    assert torch.allclose(losses.photometric_error(x, y, alpha), expected_p, atol=1e-10)
 
 
 def test_min_reprojection_and_automask_hand_maps():

@@ -124,3 +124,13 @@ def test_batch_loss_modes_are_finite_and_differentiable(mode):
     assert grad is not None and torch.isfinite(grad).all() and grad.abs().sum() > 0
     pose_grad = models["pose_encoder"].conv1.weight.grad
     assert (pose_grad is not None) == (mode != "S")
+
+
+def test_stereo_transform_shifts_like_the_baseline():
+    """Left target, right source 0.5 m to the right: a point at depth d appears f * 0.5 / d px further left."""
+    image = torch.rand(1, 3, 32, 64)
+    T = pipeline.stereo_transform(0.5, image)
+    assert torch.allclose(T[0, :3, 3], torch.tensor([-0.5, 0.0, 0.0]))
+    grid, _ = warping.sampling_grid(torch.full((1, 1, 32, 64), 10.0), _K(1), T)
+    pix_u = ((grid[..., 0] + 1) * 64 - 1) / 2
+    assert torch.allclose(pix_u, torch.arange(64.0) - 50.0 * 0.5 / 10.0, atol=1e-4)

@@ -82,6 +82,11 @@ def test_field_pose_and_extrapolation(tmpl):
     tt = torch.tensor(t, requires_grad=True)
     T.distance_to_template(tmpl, torch.tensor(world[2:]), tt, torch.tensor(yaw)).sum().backward()
     assert torch.allclose(tt.grad, torch.tensor([s, -c, 0.0], dtype=tt.grad.dtype), atol=0.05)
+    # finite gradients inside the grid and on the surface too (no sqrt(0) in the extrapolation term)
+    tt = torch.tensor(t, requires_grad=True)
+    ty = torch.tensor(yaw, requires_grad=True)
+    T.distance_to_template(tmpl, torch.tensor(world), tt, ty).sum().backward()
+    assert torch.isfinite(tt.grad).all() and torch.isfinite(ty.grad)
 
 
 def test_batched_shapes_match_loops(tmpl):
@@ -268,3 +273,26 @@ def test_voting_best_yaw_mode_and_grid_border(tmpl):
     assert torch.isinf(res.window_loss[0]).sum() == 5 and torch.isfinite(res.loss).all()
     none = V.vote(grid, off, logits, pts, None, torch.tensor([[-1, -1]]), frame, 1, sic, tmpl)
     assert none.cell[0].tolist() == [-1, -1] and torch.isinf(none.loss[0])
+
+
+# ------------------------------------------------------------------------------------------ bad input
+def test_pad_point_sets_skips_empty_and_nan_with_counts(tmpl):
+    from redsup.det3d import pointsets
+
+    sets = [np.zeros((0, 4)), np.array([[1.0, 2.0, 0.5, 0.3]]), np.array([[np.nan, 0, 0, 0], [np.inf, 1, 1, 0]]),
+            np.c_[_car_scan(["left"]), np.zeros(len(_car_scan(["left"])))]]
+    sets[3][5, 1] = np.nan
+    padded = pointsets.pad_point_sets(sets, min_points=1, max_points=64, rng=np.random.default_rng(0))
+    assert padded.keep.tolist() == [1, 3] and padded.skipped.tolist() == [0, 2] and padded.n_nonfinite == 3
+    assert padded.points.shape == (2, 64, 3) and padded.mask.sum(dim=1).tolist() == [1, 64]
+    assert "2 skipped" in padded.message()
+    trans = torch.tensor([[1.0, 2.0, 0.5], [12.0, -3.0, 0.8]])
+    sic = lambda d: L.soft_inlier_count(d, 5.0, 0.0)  # noqa: E731
+    best, per_bin = L.best_yaw_bin(padded.points, trans, N_BINS, sic, tmpl, mask=padded.mask)
+    assert torch.isfinite(per_bin).all()
+    t = trans.clone().requires_grad_(True)
+    yaw = L.yaw_bin_centers(N_BINS)[best]
+    d = T.distance_to_template(tmpl, padded.points, t, yaw)
+    loss = L.masked_mean(sic(d), padded.mask).mean()
+    loss.backward()
+    assert torch.isfinite(loss) and torch.isfinite(t.grad).all()

@@ -104,8 +104,9 @@ def _ap(gts, dets, **kw):
 # ------------------------------------------------------------------------------------ AP hand cases
 def test_perfect_detections_score_100_everywhere():
     frames = _perfect(41)
+    # moderate-only objects (30 px tall, occluded)
     frames += [([{"box": _car(20), "occ": 1, "bbox": [0, 0, 50, 30]}],
-                [{"box": _car(20), "score": 0.5, "bbox": [0, 0, 50, 30]}]) for _ in range(5)]                       # moderate-only objects (30 px tall, occluded)
+                [{"box": _car(20), "score": 0.5, "bbox": [0, 0, 50, 30]}]) for _ in range(5)]
     frames += [([{"box": _car(30), "occ": 2, "trunc": 0.4}], [{"box": _car(30), "score": 0.4}])
                for _ in range(5)]                       # hard-only objects
     res = _ap(*_scene(frames))
@@ -190,8 +191,14 @@ def test_no_ground_truth_gives_nan():
 
 
 # ------------------------------------------------------------- loop transliteration of the devkit
+def _frame_overlaps(gt, det, metric, criterion=-1):
+    if metric == "2d":
+        return B.image_box_overlap(det.bbox, gt.bbox, criterion=criterion)
+    return B.overlap_matrix(det.boxes, gt.boxes, kind=metric, criterion=criterion)
+
+
 def _devkit_ap(gts, dets, cls, difficulty, metric, min_overlap):
-    """computeStatistics / eval_class of evaluate_object.cpp, one loop per loop."""
+    """computeStatistics / eval_class of evaluate_object.cpp, one loop per loop, frame by frame."""
     NO_DET = -1e7
     prepared, n_gt = [], 0
     for gt, det in zip(gts, dets):
@@ -212,12 +219,14 @@ def _devkit_ap(gts, dets, cls, difficulty, metric, min_overlap):
         for j in range(len(det.score)):
             height = abs(det.bbox[j, 3] - det.bbox[j, 1])
             ign_det.append(1 if height < K.MIN_HEIGHT[difficulty] else (0 if det.cls[j].lower() == cls.lower() else -1))
-        ov = K._frame_overlaps(gt, det, metric) if len(gt.cls) and len(det.score) else np.zeros((len(det.score), len(gt.cls)))
+        ov = np.zeros((len(det.score), len(gt.cls)))
+        if len(gt.cls) and len(det.score):
+            ov = _frame_overlaps(gt, det, metric)
         dc = [i for i in range(len(gt.cls)) if gt.cls[i].lower() == "dontcare"]
         dc_ov = np.zeros((len(det.score), len(dc)))
         if dc and len(det.score):
             sub = K.FrameGT(gt.boxes[dc], gt.bbox[dc], gt.occlusion[dc], gt.truncation[dc], gt.cls[dc])
-            dc_ov = K._frame_overlaps(sub, det, metric, criterion=0)
+            dc_ov = _frame_overlaps(sub, det, metric, criterion=0)
         prepared.append((ign_gt, ign_det, ov, dc_ov, det.score))
 
     def stats(ign_gt, ign_det, ov, dc_ov, score, compute_fp, thresh):

@@ -123,8 +123,10 @@ def adapt(models: Models, loss_fn: LossFn, batch, params: Sequence[nn.Parameter]
 
     All modules run in eval mode (BatchNorm frozen, no dropout exists); only ``params`` need gradients during
     the call, every other parameter is bit-identical afterwards. Train/eval modes and ``requires_grad`` flags are
-    restored on exit. ``callback(step, loss, elapsed_s)`` is called with step 0 (loss None) before the first
-    update and after update k with the loss it minimised and the adaptation time so far (callback time excluded).
+    restored on exit; ``.grad`` of every parameter is None afterwards. ``callback(step, loss, elapsed_s)`` is
+    called with step 0 (loss None) before the first update and after update k with the loss it minimised and
+    the adaptation time so far (callback time excluded), e.g. to evaluate ch. 4 Table 3's checkpoints along
+    one trajectory.
     """
     all_params = [p for m in models.values() for p in m.parameters()]
     flags = [p.requires_grad for p in all_params]
@@ -219,13 +221,19 @@ def _adapt_and_predict(models, loss_fn, predict_fn, sample, params, lr, steps, c
 def direct_optimisation(variables: Mapping[str, torch.Tensor],
                         loss_fn: Callable[[Mapping[str, torch.Tensor]], Mapping[str, torch.Tensor]],
                         lr: float, steps: int, project: Callable[[Mapping[str, torch.Tensor]], Mapping] | None = None,
-                        callback: Callback | None = None) -> tuple[dict[str, torch.Tensor], list[float]]:
+                        callback: Callback | None = None, free: Sequence[str] | None = None
+                        ) -> tuple[dict[str, torch.Tensor], list[float]]:
     """Vanilla SGD on the network *outputs* as free variables (ch. 4 Table 4).
 
     ``variables`` (e.g. ``pipeline.output_variables``) are copied, never modified; ``loss_fn(vars)["loss"]``
-    is minimised; ``project`` (e.g. ``pipeline.clamp_disparities``) is applied after every step. Returns the
-    optimised copies (detached) and the loss history.
+    is minimised over the variables named in ``free`` (default: all; e.g. only the ``disp_*`` maps for the
+    "depth only" variant of §4.3); ``project`` (e.g. ``pipeline.clamp_disparities``) is applied after every
+    step. Returns the optimised copies (detached) and the loss history.
     """
+    free_set = set(variables) if free is None else set(free)
+    unknown = free_set - set(variables)
+    if unknown:
+        raise KeyError(f"free variables {sorted(unknown)} are not among {sorted(variables)}")
     current = {k: v.detach().clone() for k, v in variables.items()}
     history: list[float] = []
     if callback is not None:
@@ -233,12 +241,12 @@ def direct_optimisation(variables: Mapping[str, torch.Tensor],
     elapsed = 0.0
     for step in range(1, steps + 1):
         start = time.perf_counter()
-        leaves = {k: v.detach().requires_grad_(True) for k, v in current.items()}
+        leaves = {k: v.detach().requires_grad_(k in free_set) for k, v in current.items()}
         loss = loss_fn(leaves)["loss"]
-        grads = torch.autograd.grad(loss, list(leaves.values()), allow_unused=True)
+        names = [k for k in leaves if k in free_set]
+        grads = dict(zip(names, torch.autograd.grad(loss, [leaves[k] for k in names], allow_unused=True)))
         with torch.no_grad():
-            current = {k: (v - lr * g if g is not None else v).detach()
-                       for (k, v), g in zip(leaves.items(), grads)}
+            current = {k: (v - lr * grads[k] if grads.get(k) is not None else v).detach() for k, v in leaves.items()}
             if project is not None:
                 current = {k: v.detach() for k, v in project(current).items()}
         history.append(float(loss.detach()))

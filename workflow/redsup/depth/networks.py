@@ -180,7 +180,8 @@ def build_models(base_channels: int = 64, num_scales: int = 4) -> nn.ModuleDict:
     })
 
 
-def disp_to_depth(disp: torch.Tensor, min_depth: float = 0.1, max_depth: float = 100.0) -> tuple[torch.Tensor, torch.Tensor]:
+def disp_to_depth(disp: torch.Tensor, min_depth: float = 0.1, max_depth: float = 100.0
+                  ) -> tuple[torch.Tensor, torch.Tensor]:
     """Sigmoid disparity to (scaled disparity, depth): 1/depth = 1/max + (1/min - 1/max) * disp (Monodepth2)."""
     min_disp, max_disp = 1.0 / max_depth, 1.0 / min_depth
     scaled = min_disp + (max_disp - min_disp) * disp

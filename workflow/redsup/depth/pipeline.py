@@ -49,6 +49,16 @@ def pose_transform(axisangle: torch.Tensor, translation: torch.Tensor, name: str
     return warping.transformation_from_parameters(axisangle, translation, invert=(name == "prev"))
 
 
+def stereo_transform(baseline: float | torch.Tensor, like: torch.Tensor) -> torch.Tensor:
+    """Target->source transform (B, 4, 4) of a rectified stereo pair whose source camera centre sits at
+    x = ``baseline`` metres in the target camera frame (left target, right source: baseline > 0).
+    A metric baseline makes the S / MS depth metric (evaluate with ``fixed_scale=1``, no median scaling)."""
+    b = like.shape[0]
+    base = torch.as_tensor(baseline, dtype=like.dtype, device=like.device).reshape(-1).expand(b)
+    t = torch.stack([-base, torch.zeros_like(base), torch.zeros_like(base)], dim=1)
+    return warping.translation_transform(t)
+
+
 def source_transforms(models: Mapping[str, nn.Module], batch: Mapping) -> dict[str, torch.Tensor]:
     """Target->source transforms: pose network for temporal sources, ``batch["transforms"]`` for the others."""
     known = batch.get("transforms", {})

@@ -7,8 +7,9 @@ BEV intersection of two rotated rectangles (both convex) is computed in plain ve
 intersection polygon's vertices are the corners of each rectangle that lie inside the other plus the
 crossings of their edges (at most 4 + 4 + 16 candidates); the valid candidates are sorted by angle around
 their centroid and the shoelace formula gives the area. `benchmarks/bench_det3d.py` compares it with
-shapely 2's vectorised `intersection` + `area`; numpy was ~10x faster on the same pairs (both exact to
-1e-9 m^2), so numpy is the default and shapely stays available as `method="shapely"` for cross-checks.
+shapely 2's vectorised `intersection` + `area`: numpy took 5 us per overlapping pair vs 21 us for shapely
+(20k pairs), 41 vs 123 ms for a 500 x 500 scene, and the two agree to 1e-12 m^2, so numpy is the default
+and shapely stays available as `method="shapely"` for cross-checks.
 
 Pairwise matrices (N x M) first drop pairs whose circumscribed circles do not touch, then evaluate the
 remaining pairs at once, so sparse scenes cost little. Non-finite boxes give IoU 0.
@@ -191,17 +192,21 @@ def iou_3d(a, b, method: str = "numpy") -> np.ndarray:
 
 
 def image_box_overlap(a, b, criterion: int = -1) -> np.ndarray:
-    """(N, M) overlap of 2D boxes (x1, y1, x2, y2) as the KITTI devkit computes it (no +1 on widths).
+    """(..., N, M) overlap of 2D boxes (x1, y1, x2, y2) a (..., N, 4) and b (..., M, 4) as the KITTI
+    devkit computes it (no +1 on widths); leading dimensions broadcast.
 
     criterion -1: IoU; 0: intersection / area(a); 1: intersection / area(b). Non-finite boxes give 0.
     """
-    a = np.asarray(a, dtype=np.float64).reshape(-1, 4)
-    b = np.asarray(b, dtype=np.float64).reshape(-1, 4)
-    iw = np.minimum(a[:, None, 2], b[None, :, 2]) - np.maximum(a[:, None, 0], b[None, :, 0])
-    ih = np.minimum(a[:, None, 3], b[None, :, 3]) - np.maximum(a[:, None, 1], b[None, :, 1])
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    a = a[None] if a.ndim == 1 else a
+    b = b[None] if b.ndim == 1 else b
+    A, Bq = a[..., :, None, :], b[..., None, :, :]
+    iw = np.minimum(A[..., 2], Bq[..., 2]) - np.maximum(A[..., 0], Bq[..., 0])
+    ih = np.minimum(A[..., 3], Bq[..., 3]) - np.maximum(A[..., 1], Bq[..., 1])
     inter = np.where((iw > 0) & (ih > 0), iw * ih, 0.0)
-    area_a = ((a[:, 2] - a[:, 0]) * (a[:, 3] - a[:, 1]))[:, None]
-    area_b = ((b[:, 2] - b[:, 0]) * (b[:, 3] - b[:, 1]))[None, :]
+    area_a = (A[..., 2] - A[..., 0]) * (A[..., 3] - A[..., 1])
+    area_b = (Bq[..., 2] - Bq[..., 0]) * (Bq[..., 3] - Bq[..., 1])
     if criterion == -1:
         denom = area_a + area_b - inter
     elif criterion == 0:
@@ -213,6 +218,22 @@ def image_box_overlap(a, b, criterion: int = -1) -> np.ndarray:
     with np.errstate(divide="ignore", invalid="ignore"):
         out = np.where(inter > 0, inter / denom, 0.0)
     return np.nan_to_num(out, nan=0.0)
+
+
+def overlap_matrix_batched(a: np.ndarray, b: np.ndarray, kind: str = "bev", criterion: int = -1,
+                           method: str = "numpy") -> np.ndarray:
+    """(F, N, M) overlap of padded per-frame box sets a (F, N, 7) and b (F, M, 7) within each frame;
+    NaN rows (padding) give 0. All candidate pairs of all frames are evaluated in one call."""
+    a = np.asarray(a, dtype=np.float64)
+    b = np.asarray(b, dtype=np.float64)
+    out = np.zeros(a.shape[:2] + (b.shape[1],))
+    ra = 0.5 * np.hypot(a[..., 3], a[..., 4])
+    rb = 0.5 * np.hypot(b[..., 3], b[..., 4])
+    d2 = (a[:, :, None, 0] - b[:, None, :, 0]) ** 2 + (a[:, :, None, 1] - b[:, None, :, 1]) ** 2
+    f, i, j = np.nonzero(d2 <= (ra[:, :, None] + rb[:, None, :]) ** 2)
+    if len(f):
+        out[f, i, j] = overlap_pairs(a[f, i], b[f, j], kind=kind, criterion=criterion, method=method)
+    return out
 
 
 def boxes_to_image_bbox(boxes, T_camera_vehicle: np.ndarray, K: np.ndarray, image_size: tuple[int, int],
@@ -229,16 +250,12 @@ def boxes_to_image_bbox(boxes, T_camera_vehicle: np.ndarray, K: np.ndarray, imag
     uv, z = geometry.project(np.asarray(K, dtype=np.float64), cam)
     uv, z = uv.reshape(len(b), 8, 2), z.reshape(len(b), 8)
     front = z > min_depth
-    big = np.inf
-    u = np.where(front, uv[..., 0], np.nan)
-    v = np.where(front, uv[..., 1], np.nan)
     has = front.any(axis=1)
     width, height = image_size
-    with np.errstate(invalid="ignore"):
-        x1 = np.clip(np.nanmin(np.where(front, u, big), axis=1), 0, width - 1)
-        x2 = np.clip(np.nanmax(np.where(front, u, -big), axis=1), 0, width - 1)
-        y1 = np.clip(np.nanmin(np.where(front, v, big), axis=1), 0, height - 1)
-        y2 = np.clip(np.nanmax(np.where(front, v, -big), axis=1), 0, height - 1)
+    x1 = np.clip(np.where(front, uv[..., 0], np.inf).min(axis=1), 0, width - 1)
+    x2 = np.clip(np.where(front, uv[..., 0], -np.inf).max(axis=1), 0, width - 1)
+    y1 = np.clip(np.where(front, uv[..., 1], np.inf).min(axis=1), 0, height - 1)
+    y2 = np.clip(np.where(front, uv[..., 1], -np.inf).max(axis=1), 0, height - 1)
     box = np.stack([x1, y1, x2, y2], axis=1)
     keep = has & (x2 > x1) & (y2 > y1)
     out[keep] = box[keep]

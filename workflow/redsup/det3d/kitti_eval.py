@@ -83,61 +83,82 @@ def thresholds(scores: np.ndarray, n_gt: int, n_sample_pts: int = N_SAMPLE_PTS) 
 def _lower(names, n: int) -> np.ndarray:
     if names is None:
         return np.full(n, "car", dtype=object)
-    return np.array([str(s).lower() for s in names], dtype=object)
+    return np.array([str(v).lower() for v in names], dtype=object).reshape(n)
 
 
-def _pad(rows: list[np.ndarray], width: int, fill, dtype) -> np.ndarray:
-    out = np.full((len(rows), width), fill, dtype=dtype)
-    for f, r in enumerate(rows):
-        out[f, :len(r)] = r
+@dataclass
+class _Stacked:
+    """All frames padded to G ground-truth and D detection slots (padding: NaN boxes, -inf scores)."""
+    gt_boxes: np.ndarray      # (F, G, 7)
+    gt_bbox: np.ndarray       # (F, G, 4)
+    gt_occ: np.ndarray        # (F, G) float, padding NaN
+    gt_trunc: np.ndarray      # (F, G)
+    gt_cls: np.ndarray        # (F, G) lower-case names, padding ""
+    det_boxes: np.ndarray     # (F, D, 7)
+    det_bbox: np.ndarray      # (F, D, 4)
+    det_score: np.ndarray     # (F, D)
+    det_cls: np.ndarray       # (F, D)
+
+
+def _stack(gts: list[FrameGT], dets: list[FrameDet]) -> _Stacked:
+    n_f = len(gts)
+    g_max = max([len(g.cls) for g in gts] + [1])
+    d_max = max([len(d.score) for d in dets] + [1])
+    out = _Stacked(np.full((n_f, g_max, 7), np.nan), np.full((n_f, g_max, 4), np.nan), np.full((n_f, g_max), np.nan),
+                   np.full((n_f, g_max), np.nan), np.full((n_f, g_max), "", dtype=object),
+                   np.full((n_f, d_max, 7), np.nan), np.full((n_f, d_max, 4), np.nan),
+                   np.full((n_f, d_max), -np.inf), np.full((n_f, d_max), "", dtype=object))
+    for f, (gt, det) in enumerate(zip(gts, dets)):
+        g, d = len(gt.cls), len(det.score)
+        if g:
+            out.gt_boxes[f, :g] = np.asarray(gt.boxes, dtype=np.float64).reshape(g, 7)
+            out.gt_bbox[f, :g] = np.asarray(gt.bbox, dtype=np.float64).reshape(g, 4)
+            out.gt_occ[f, :g] = np.asarray(gt.occlusion, dtype=np.float64)
+            out.gt_trunc[f, :g] = np.asarray(gt.truncation, dtype=np.float64)
+            out.gt_cls[f, :g] = _lower(gt.cls, g)
+        if d:
+            out.det_boxes[f, :d] = np.asarray(det.boxes, dtype=np.float64).reshape(d, 7)
+            out.det_bbox[f, :d] = np.asarray(det.bbox, dtype=np.float64).reshape(d, 4)
+            out.det_score[f, :d] = np.asarray(det.score, dtype=np.float64)
+            out.det_cls[f, :d] = _lower(det.cls, d)
     return out
 
 
-def _frame_overlaps(gt: FrameGT, det: FrameDet, metric: str, criterion: int = -1) -> np.ndarray:
-    """(D, G) overlap of detections with ground-truth rows in one metric."""
+def _overlaps(st: _Stacked, metric: str, gt_rows: np.ndarray | None = None, criterion: int = -1) -> np.ndarray:
+    """(F, D, G) overlap of detections with ground-truth rows (only `gt_rows` (F, G) bool if given)."""
     if metric == "2d":
-        return box_ops.image_box_overlap(det.bbox, gt.bbox, criterion=criterion)
-    return box_ops.overlap_matrix(det.boxes, gt.boxes, kind=metric, criterion=criterion)
+        gb = st.gt_bbox if gt_rows is None else np.where(gt_rows[..., None], st.gt_bbox, np.nan)
+        return box_ops.image_box_overlap(st.det_bbox, gb, criterion=criterion)
+    gb = st.gt_boxes if gt_rows is None else np.where(gt_rows[..., None], st.gt_boxes, np.nan)
+    return box_ops.overlap_matrix_batched(st.det_boxes, gb, kind=metric, criterion=criterion)
 
 
 @dataclass
 class _Prepared:
-    """Padded per-frame arrays for one class and difficulty (F frames, D dets, G gts)."""
+    """Ignore flags for one class and difficulty (F frames, D dets, G gts)."""
     ign_gt: np.ndarray       # (F, G) 0 valid, 1 ignored, -1 not considered / padding
     ign_det: np.ndarray      # (F, D) 0 valid, 1 ignored (too small), -1 other class / padding
     score: np.ndarray        # (F, D)
     n_gt: int
 
 
-def _prepare(gts: list[FrameGT], dets: list[FrameDet], cls: str, difficulty: int, g_max: int,
-             d_max: int) -> _Prepared:
+def _prepare(st: _Stacked, cls: str, difficulty: int) -> _Prepared:
     cls = cls.lower()
-    neighbour = NEIGHBOUR_CLASS.get(cls)
-    ign_gt_rows, ign_det_rows, score_rows = [], [], []
-    n_gt = 0
-    for gt, det in zip(gts, dets):
-        names = _lower(gt.cls, len(gt.cls))
-        bbox = np.asarray(gt.bbox, dtype=np.float64).reshape(-1, 4)
-        height = np.nan_to_num(bbox[:, 3] - bbox[:, 1], nan=0.0)
-        ignore = ((np.asarray(gt.occlusion) > MAX_OCCLUSION[difficulty])
-                  | (np.asarray(gt.truncation, dtype=np.float64) > MAX_TRUNCATION[difficulty])
+    neighbour = NEIGHBOUR_CLASS.get(cls, None)
+    height = np.nan_to_num(st.gt_bbox[..., 3] - st.gt_bbox[..., 1], nan=0.0)
+    with np.errstate(invalid="ignore"):
+        ignore = ((st.gt_occ > MAX_OCCLUSION[difficulty]) | (st.gt_trunc > MAX_TRUNCATION[difficulty])
                   | (height <= MIN_HEIGHT[difficulty]))
-        valid_class = np.where(names == cls, 1, np.where(names == neighbour, 0, -1)) if neighbour \
-            else np.where(names == cls, 1, -1)
-        ig = np.full(len(names), -1, dtype=np.int8)
-        ig[(valid_class == 0) | ((valid_class == 1) & ignore)] = 1
-        ig[(valid_class == 1) & ~ignore] = 0
-        n_gt += int((ig == 0).sum())
-        ign_gt_rows.append(ig)
-
-        dbox = np.asarray(det.bbox, dtype=np.float64).reshape(-1, 4)
-        d_names = _lower(det.cls, len(dbox))
-        d_height = np.nan_to_num(np.abs(dbox[:, 3] - dbox[:, 1]), nan=0.0)
-        idt = np.where(d_height < MIN_HEIGHT[difficulty], 1, np.where(d_names == cls, 0, -1)).astype(np.int8)
-        ign_det_rows.append(idt)
-        score_rows.append(np.asarray(det.score, dtype=np.float64))
-    return _Prepared(_pad(ign_gt_rows, g_max, -1, np.int8), _pad(ign_det_rows, d_max, -1, np.int8),
-                     _pad(score_rows, d_max, -np.inf, np.float64), n_gt)
+    same = st.gt_cls == cls
+    neigh = (st.gt_cls == neighbour) if neighbour else np.zeros_like(same)
+    ign_gt = np.full(same.shape, -1, dtype=np.int8)
+    ign_gt[neigh | (same & ignore)] = 1
+    ign_gt[same & ~ignore] = 0
+    d_height = np.nan_to_num(np.abs(st.det_bbox[..., 3] - st.det_bbox[..., 1]), nan=0.0)
+    real = np.isfinite(st.det_score) | (st.det_cls != "")
+    ign_det = np.where(d_height < MIN_HEIGHT[difficulty], 1, np.where(st.det_cls == cls, 0, -1)).astype(np.int8)
+    ign_det[~real] = -1
+    return _Prepared(ign_gt, ign_det, st.det_score, int((ign_gt == 0).sum()))
 
 
 def _first_pass(ov: np.ndarray, prep: _Prepared, min_overlap: float) -> np.ndarray:
@@ -234,36 +255,25 @@ def evaluate(gts: list[FrameGT], dets: list[FrameDet], classes: tuple[str, ...] 
     for m in metrics:
         if m not in METRICS:
             raise ValueError(f"unknown metric {m!r}; expected one of {METRICS}")
-    g_max = max([len(g.cls) for g in gts] + [1])
-    d_max = max([len(d.score) for d in dets] + [1])
-    n_f = len(gts)
+    st = _stack(gts, dets)
+    dontcare = st.gt_cls == "dontcare"
+    prepared = {(cls, d): _prepare(st, cls, d) for cls in classes for d in range(len(DIFFICULTIES))}
     results: dict[str, float] = {}
-    dc_rows = [np.flatnonzero(_lower(g.cls, len(g.cls)) == "dontcare") for g in gts]
     for metric in metrics:
-        ov = np.zeros((n_f, d_max, g_max))
-        dc_ov = np.zeros((n_f, d_max))
-        for f, (gt, det) in enumerate(zip(gts, dets)):
-            if len(det.score) and len(gt.cls):
-                ov[f, :len(det.score), :len(gt.cls)] = _frame_overlaps(gt, det, metric)
-                if len(dc_rows[f]):
-                    dc_metric = "2d" if dontcare_2d_all_metrics else metric
-                    rows = dc_rows[f]
-                    dc_gt = FrameGT(np.asarray(gt.boxes).reshape(-1, 7)[rows], np.asarray(gt.bbox).reshape(-1, 4)[rows],
-                                    np.asarray(gt.occlusion)[rows], np.asarray(gt.truncation)[rows],
-                                    np.asarray(gt.cls)[rows])
-                    dc_ov[f, :len(det.score)] = _frame_overlaps(dc_gt, det, dc_metric, criterion=0).max(axis=1)
+        ov = _overlaps(st, metric)
+        dc_ov = np.zeros(st.det_score.shape)
+        if dontcare.any():
+            dc_metric = "2d" if dontcare_2d_all_metrics else metric
+            dc_ov = _overlaps(st, dc_metric, gt_rows=dontcare, criterion=0).max(axis=2)
         for cls in classes:
             for difficulty, name in enumerate(DIFFICULTIES):
-                prep = _prepare(gts, dets, cls, difficulty, g_max, d_max)
+                prep = prepared[(cls, difficulty)]
                 for thr in iou_thresholds.get(cls, ()):
                     key = f"{cls}_{metric}_{thr:g}/{name}"
                     if prep.n_gt == 0:
                         results[f"{key}_R11"] = results[f"{key}_R40"] = float("nan")
                         continue
-                    scores = _first_pass(ov, prep, thr)
-                    t = thresholds(scores, prep.n_gt)
+                    t = thresholds(_first_pass(ov, prep, thr), prep.n_gt)
                     tp, fp, _ = _second_pass(ov, dc_ov, prep, thr, t)
-                    r11, r40 = _ap_from_counts(tp, fp)
-                    results[f"{key}_R11"] = r11
-                    results[f"{key}_R40"] = r40
+                    results[f"{key}_R11"], results[f"{key}_R40"] = _ap_from_counts(tp, fp)
     return results

@@ -49,6 +49,17 @@ def outlier_aware(d: torch.Tensor, log_var: torch.Tensor) -> torch.Tensor:
     return d * d * torch.exp(-log_var) + log_var
 
 
+def masked_mean(per_point: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
+    """Mean over the last (point) axis of the entries where mask (broadcastable) is True; 0 where a set
+    has no real point. Masked-out entries never change the value; pad with finite values (as
+    `pointsets.pad_point_sets` does) to keep gradients finite too."""
+    if mask is None:
+        return per_point.mean(dim=-1)
+    mask = mask.expand_as(per_point)
+    total = torch.where(mask, per_point, torch.zeros((), dtype=per_point.dtype, device=per_point.device))
+    return total.sum(dim=-1) / mask.sum(dim=-1).clamp_min(1).to(per_point.dtype)
+
+
 def yaw_bin_centers(n_bins: int, dtype=torch.float32, device=None) -> torch.Tensor:
     """(K,) yaw of each bin: -pi + 2 pi k / K."""
     return -math.pi + 2 * math.pi * torch.arange(n_bins, dtype=dtype, device=device) / n_bins
@@ -69,21 +80,18 @@ def best_yaw_bin(points: torch.Tensor, translation: torch.Tensor, n_bins: int,
     points (B, P, 3) padded L_m sets in the frame of `translation` (B, 3); mask (B, P) bool marks real
     points (None = all). loss_fn maps distances (B, K, P) to per-point losses of the same shape, e.g.
     ``lambda d: soft_inlier_count(d, 5.0, 0.0)`` or ``lambda d: outlier_aware(d, log_var[:, None])``.
-    Padded entries may hold anything (NaN included). The search runs without gradients (the arg-min is a classification target); train the translation
-    through the loss re-evaluated at the best bin's yaw. Objects without points get loss 0 in every bin
-    and bin 0: skip them before calling. Ties go to the lowest bin index.
+    Padded entries may hold anything (NaN included: no gradients here). The search runs without gradients (the arg-min is
+    a classification target); train the translation through the loss re-evaluated at the best bin's yaw
+    (`masked_mean(loss_fn(distance_to_template(...)), mask)` with `yaw_bin_centers(K)[best]`).
+    Objects without points get loss 0 in every bin and bin 0: skip them before calling (see
+    `pointsets.pad_point_sets`). Ties go to the lowest bin index. Memory: a few (B, K, P) temporaries
+    (64 x 64 x 256 float32 = 4 MB each); split very large batches in the caller.
     """
     with torch.no_grad():
         yaws = yaw_bin_centers(n_bins, dtype=points.dtype, device=points.device)
         d = distance_to_template(template, points[:, None], translation[:, None],
                                  yaws[None, :].expand(points.shape[0], n_bins))      # (B, K, P)
-        per_point = loss_fn(d)
-        if mask is None:
-            per_bin = per_point.mean(dim=-1)
-        else:
-            m = mask[:, None, :]
-            per_point = torch.where(m, per_point, torch.zeros((), dtype=per_point.dtype))
-            per_bin = per_point.sum(dim=-1) / m.sum(dim=-1).clamp_min(1).to(per_point.dtype)
+        per_bin = masked_mean(loss_fn(d), None if mask is None else mask[:, None, :])
         return per_bin.argmin(dim=1), per_bin
 
 
@@ -93,7 +101,7 @@ def posed_keypoints(translation: torch.Tensor, yaw: torch.Tensor, keypoints: tor
     kx, ky, kz = keypoints[:, 0], keypoints[:, 1], keypoints[:, 2]
     x = c * kx - s * ky + translation[..., 0:1]
     y = s * kx + c * ky + translation[..., 1:2]
-    z = kz + translation[..., 2:3] + 0 * c
+    z = (kz + translation[..., 2:3]).expand_as(x)
     return torch.stack([x, y, z], dim=-1)
 
 

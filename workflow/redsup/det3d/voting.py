@@ -18,7 +18,7 @@ from typing import Callable
 
 import torch
 
-from redsup.det3d.losses import yaw_bin_centers
+from redsup.det3d.losses import masked_mean, yaw_bin_centers
 from redsup.det3d.template import Template, distance_to_template
 
 
@@ -108,11 +108,11 @@ def vote(grid: BevGrid, offsets: torch.Tensor, yaw_logits: torch.Tensor, points:
         if yaw_mode == "predicted":
             yaw = bins[yaw_logits.permute(0, 2, 3, 1)[f, r, c].argmax(dim=-1)]   # (N, C)
             d = distance_to_template(template, points[:, None], centre, yaw)     # (N, C, P)
-            loss = _masked_mean(loss_fn(d), m)
+            loss = masked_mean(loss_fn(d), m)
         else:
             d = distance_to_template(template, points[:, None, None], centre[:, :, None],
                                      bins.expand(n, cand.shape[1], n_bins))      # (N, C, K, P)
-            per_bin = _masked_mean(loss_fn(d), None if m is None else m[:, :, None])
+            per_bin = masked_mean(loss_fn(d), None if m is None else m[:, :, None])
             loss, best = per_bin.min(dim=-1)
             yaw = bins[best]
         loss = torch.where(inside, loss, torch.full_like(loss, float("inf")))
@@ -122,10 +122,3 @@ def vote(grid: BevGrid, offsets: torch.Tensor, yaw_logits: torch.Tensor, points:
         cell = torch.where(found[:, None], cand[idx, k], torch.full_like(cand[idx, k], -1))
         return VoteResult(cell, centre[idx, k], yaw[idx, k], loss[idx, k], cand, loss)
 
-
-def _masked_mean(per_point: torch.Tensor, mask: torch.Tensor | None) -> torch.Tensor:
-    if mask is None:
-        return per_point.mean(dim=-1)
-    mask = mask.expand_as(per_point)
-    total = torch.where(mask, per_point, torch.zeros((), dtype=per_point.dtype)).sum(dim=-1)
-    return total / mask.sum(dim=-1).clamp_min(1).to(per_point.dtype)

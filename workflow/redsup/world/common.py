@@ -52,6 +52,11 @@ def heading_frames(yaw: np.ndarray, normal: np.ndarray) -> np.ndarray:
     return np.stack([fwd, left, up], axis=-1)
 
 
+def rotate(v: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """R applied to the rows of v (..., 3); einsum, not BLAS, so no thread pool spins up on big arrays."""
+    return np.einsum("...j,ij->...i", v, R)
+
+
 def pose(R: np.ndarray, t: np.ndarray) -> np.ndarray:
     """4x4 homogeneous transform from a rotation and a translation."""
     T = np.eye(4)

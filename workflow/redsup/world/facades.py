@@ -41,17 +41,22 @@ def building(local: np.ndarray, face: np.ndarray, half: np.ndarray, rows: np.nda
     w = lw[:, 2] + hw[:, 2] - table["sunk"][r]          # height above the street
     top = 2 * hw[:, 2] - table["sunk"][r]
     colour = table["colour"][r].astype(np.float32)
-    plaster = 1.0 + 0.14 * noise.fbm2(along + 37.0 * sd, w, style.seed + 72, 4.0, 8, f)
-    plaster -= 0.08 * np.clip(noise.fbm2(along + 11.0 * sd, w * 0.25, style.seed + 73, 6.0, 3, f), 0, 1)
-    # bricks: staggered courses, per-brick tone, light mortar
-    course = np.floor(w / 0.075)
-    shift = np.mod(course, 2.0) * 0.12
-    brick_id = np.floor((along + shift) / 0.24)
-    tone = (noise.hash01(brick_id.astype(np.int64), course.astype(np.int64), style.seed + 74) - 0.5)
-    mortar = np.maximum(noise.grid_lines(w, 0.075, 0.012, f), noise.grid_lines(along + shift, 0.24, 0.012, f))
-    brick = (1.0 + 0.3 * tone * noise.octave_weight(0.075, f)) * (1.0 - mortar) + 1.45 * mortar
-    is_brick = table["brick"][r]
-    wall_v = np.where(is_brick, brick * (1.0 + 0.06 * noise.fbm2(along, w, style.seed + 75, 1.0, 4, f)), plaster)
+    is_brick = table["brick"][r].astype(bool)
+    wall_v = np.ones(len(w), np.float32)
+    pl = ~is_brick
+    if pl.any():  # plaster: multi-scale mottling and vertical stains
+        a, b, fb = along[pl] + 37.0 * sd[pl], w[pl], f[pl]
+        wall_v[pl] = 1.0 + 0.14 * noise.fbm2(a, b, style.seed + 72, 4.0, 8, fb) \
+            - 0.08 * np.clip(noise.fbm2(a, b * 0.25, style.seed + 73, 6.0, 3, fb), 0, 1)
+    if is_brick.any():  # bricks: staggered courses, per-brick tone, light mortar
+        a, b, fb = along[is_brick], w[is_brick], f[is_brick]
+        course = np.floor(b / 0.075)
+        shift = np.mod(course, 2.0) * 0.12
+        brick_id = np.floor((a + shift) / 0.24)
+        tone = noise.hash01(brick_id.astype(np.int64), course.astype(np.int64), style.seed + 74) - 0.5
+        mortar = np.maximum(noise.grid_lines(b, 0.075, 0.012, fb), noise.grid_lines(a + shift, 0.24, 0.012, fb))
+        brick = (1.0 + 0.3 * tone * noise.octave_weight(0.075, fb)) * (1.0 - mortar) + 1.45 * mortar
+        wall_v[is_brick] = brick * (1.0 + 0.06 * noise.fbm2(a, b, style.seed + 75, 1.0, 4, fb))
     col = colour * wall_v[:, None]
     # window grid, centred on the facade
     spacing = table["spacing"][r]
@@ -160,3 +165,22 @@ def car(p: np.ndarray, face: np.ndarray, kind: np.ndarray, rows: np.ndarray, tab
     out.reflect[:] = refl
     out.glass[:] = gl
     return out
+
+
+def car_reflectance(p: np.ndarray, face: np.ndarray, kind: np.ndarray, rows: np.ndarray, table: dict,
+                    local: np.ndarray, half: np.ndarray, fp: np.ndarray) -> np.ndarray:
+    """LiDAR reflectance of car points (the same layout as `car`, without the colour work): paint by
+    brightness, retro-reflective lamps, bright number plates, dark glass."""
+    size = table["size"][rows]
+    W, hb = size[:, 1], BODY_HEIGHT * size[:, 2]
+    ay, z = np.abs(p[:, 1]), p[:, 2]
+    refl = 0.25 + 0.35 * table["colour"][rows].mean(axis=1)
+    ends = (kind != KIND_CABIN) & (face // 2 == 0)
+    lamp = _box(ay, 0.32 * W, 0.46 * W, z, 0.64 * hb, 0.88 * hb, fp) * ends
+    plate = _box(ay, -1.0, 0.26, z, 0.18 * hb, 0.18 * hb + 0.11, fp) * ends
+    refl = refl + (0.7 - refl) * lamp + (0.9 - refl) * plate
+    cab = kind == KIND_CABIN
+    if cab.any():
+        gl = glass_mask(local[cab], face[cab], half[cab])
+        refl[np.nonzero(cab)[0][gl]] = 0.05
+    return refl.astype(np.float32)

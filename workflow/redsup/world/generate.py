@@ -119,7 +119,7 @@ def _render_frames(world, cfg, dom, cams, lidar, view, n_frames, folder: Path, r
             stats["car_points"] += int((sw["instance"] > 0).sum())
             for cam in cams:
                 T_wc = state.T_world_vehicle @ cam.T_vehicle_sensor
-                out = render_camera(cam, T_wc, state.prims, view, dom["appearance"], cfg["shading"],
+                out = render_camera(cam, T_wc, state.prims, view, dom["appearance"], cfg["pixel_noise"],
                                     cfg["render_distance"], cfg["fog_distance"], rng)
                 write_png(folder / cam.name / f"{name}.png", out["rgb"])
                 write_png(folder / "gt" / "instance" / cam.name / f"{name}.png", out["instance"])

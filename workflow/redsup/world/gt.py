@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .common import rotate
 from .prims import CAR_KINDS, Prims
 from .raycast import Pairs
 from .sensors import box_corners
@@ -76,14 +77,14 @@ def frame_rows(frame: int, car_pos, car_rot, car_vel, cars: dict, T_world_vehicl
     size = cars["size"][near]
     tid = cars["track_id"][near]
     centre_w = car_boxes_world(car_pos[near], car_rot[near], size)
-    centre_v = centre_w @ T_vw[:3, :3].T + T_vw[:3, 3]
-    fwd_v = car_rot[near, :, 0] @ T_vw[:3, :3].T
+    centre_v = rotate(centre_w, T_vw[:3, :3]) + T_vw[:3, 3]
+    fwd_v = rotate(car_rot[near, :, 0], T_vw[:3, :3])
     yaw = np.arctan2(fwd_v[:, 1], fwd_v[:, 0])
     max_id = int(cars["track_id"].max())
     count, box = instance_boxes(instance, max_id)
     T_cw = np.linalg.inv(T_world_cam)
     corners = box_corners(centre_w, car_rot[near], size / 2)
-    trunc = truncation(cam, corners @ T_cw[:3, :3].T + T_cw[:3, 3])
+    trunc = truncation(cam, rotate(corners, T_cw[:3, :3]) + T_cw[:3, 3])
     visible = count[tid]
     occ = occlusion_level(visible, own[near], gt_cfg["occlusion_fractions"])
     nl = n_lidar_by_track[tid] if len(n_lidar_by_track) > max_id else np.zeros(len(near), np.int64)

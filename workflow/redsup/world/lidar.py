@@ -9,9 +9,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from .prims import KIND_CABIN, Prims, glass_mask
+from . import noise
+from .common import rotate
+from .facades import car_reflectance
+from .prims import CAR_KINDS, KIND_BARRIER, KIND_CABIN, KIND_POLE, KIND_RAIL, KIND_TRUNK, Prims, glass_mask
 from .raycast import GROUND, Hits, nearest, prim_pairs, with_ground
-from .shade import SceneView, hit_geometry, materials
+from .road import PART_KERB, PART_ROAD
+from .shade import SceneView, hit_geometry
+from .textures import markings
+
+# reflectance of surfaces without a pattern that matters to a LiDAR
+REFLECT = {"sidewalk": 0.25, "kerb": 0.3, "verge": 0.2, "building": 0.32, KIND_POLE: 0.45, KIND_TRUNK: 0.3,
+           KIND_RAIL: 0.6, KIND_BARRIER: 0.4, "crown": 0.22}
 
 MAX_GLASS_LAYERS = 3
 
@@ -41,7 +50,7 @@ def sweep(lidar, T_world_lidar: np.ndarray, prims: Prims, view: SceneView, cfg: 
     (track id or 0), passed (went through glass at least once), label."""
     origin = T_world_lidar[:3, 3]
     dirs_l = lidar.ray_dirs()
-    dirs = dirs_l @ T_world_lidar[:3, :3].T
+    dirs = rotate(dirs_l, T_world_lidar[:3, :3])
     n = lidar.n_rays
     rmax = lidar.max_range
     pairs = prim_pairs(lidar, T_world_lidar, dirs, prims, rmax)
@@ -85,11 +94,43 @@ def sweep(lidar, T_world_lidar: np.ndarray, prims: Prims, view: SceneView, cfg: 
     pts = origin + dirs[keep] * tk[:, None]
     normal, local, half = hit_geometry(pts, prim[keep], face[keep], prims, view.road)
     fp = np.maximum(tk * cfg["beam_divergence"], 0.005)
-    surf, inst = materials(pts, prim[keep], face[keep], local, half, prims, view, fp)
+    base, inst = reflectance(pts, prim[keep], face[keep], local, half, prims, view, fp)
     cos_i = np.abs(np.sum(normal * dirs[keep], axis=1))
-    refl = surf.reflect * (0.35 + 0.65 * cos_i) + rng.normal(0.0, 0.02, len(keep))
+    refl = base * (0.35 + 0.65 * cos_i) + rng.normal(0.0, 0.02, len(keep))
     r = tk + rng.normal(0.0, cfg["range_noise"], len(keep))
     xyz = dirs_l[keep] * r[:, None]
     points = np.concatenate([xyz, np.clip(refl, 0.0, 1.0)[:, None]], axis=1).astype("<f4")
-    return {"points": points, "instance": inst, "passed": passed[keep], "label": surf.label,
-            "ground": prim[keep] == GROUND}
+    return {"points": points, "instance": inst, "passed": passed[keep], "ground": prim[keep] == GROUND}
+
+
+def reflectance(points, prim, face, local, half, prims: Prims, view: SceneView, fp):
+    """(reflectance before incidence falloff, instance id) at LiDAR hits."""
+    n = len(points)
+    out = np.full(n, REFLECT["building"], np.float32)
+    inst = np.zeros(n, np.uint16)
+    gr = prim == GROUND
+    if gr.any():
+        x, y = points[gr, 0], points[gr, 1]
+        part = face[gr]
+        road = part == PART_ROAD
+        walk = np.abs(y) < view.style.road_half + view.style.sidewalk_width
+        val = np.where(part == PART_KERB, REFLECT["kerb"], np.where(walk, REFLECT["sidewalk"], REFLECT["verge"]))
+        if road.any():
+            xr, yr = x[road], y[road]
+            val[road] = 0.1 + 0.03 * (noise.value2(xr / 0.7, yr / 0.7, 5) - 0.5) \
+                + 0.65 * markings(xr, yr, view.style, fp[gr][road])
+        out[gr] = val
+    box = (prim >= 0) & (prim < prims.n_box)
+    kind = np.zeros(n, np.int16)
+    ent = np.zeros(n, np.int64)
+    kind[box] = prims.kind[prim[box]]
+    ent[box] = prims.ent[prim[box]]
+    for k in (KIND_POLE, KIND_TRUNK, KIND_RAIL, KIND_BARRIER):
+        out[box & (kind == k)] = REFLECT[k]
+    car = box & np.isin(kind, CAR_KINDS)
+    if car.any():
+        p_car = local[car] + prims.offset[prim[car]]
+        out[car] = car_reflectance(p_car, face[car], kind[car], ent[car], view.cars, local[car], half[car], fp[car])
+        inst[car] = view.cars["track_id"][ent[car]]
+    out[prim >= prims.n_box] = REFLECT["crown"]
+    return out, inst

@@ -37,27 +37,40 @@ def _fade(f: np.ndarray) -> np.ndarray:
     return f * f * (3.0 - 2.0 * f)
 
 
+_TABLE = np.random.default_rng(20260101).random(256 * 256).astype(np.float32)  # lattice values
+
+
+def _lattice(x: np.ndarray, seed: int):
+    xs = np.asarray(x, dtype=np.float32)
+    xf = np.floor(xs)
+    return xf.astype(np.int32) + np.int32(seed), xs - xf
+
+
 def value2(x: np.ndarray, y: np.ndarray, seed: int) -> np.ndarray:
-    """Smooth 2D value noise in [0, 1] with unit lattice spacing."""
-    xf, yf = np.floor(x), np.floor(y)
-    ix, iy = xf.astype(np.int64), yf.astype(np.int64)
-    ux, uy = _fade((x - xf).astype(np.float32)), _fade((y - yf).astype(np.float32))
-    a = hash01(ix, iy, seed)
-    b = hash01(ix + 1, iy, seed)
-    c = hash01(ix, iy + 1, seed)
-    d = hash01(ix + 1, iy + 1, seed)
+    """Smooth 2D value noise in [0, 1] with unit lattice spacing (values from a 256 x 256 table whose
+    window is shifted by the seed)."""
+    ix, fx = _lattice(x, (seed * 71) % 256)
+    iy, fy = _lattice(y, (seed * 139) % 256)
+    ux, uy = _fade(fx), _fade(fy)
+    i0, i1 = ix & 255, (ix + 1) & 255
+    j0, j1 = (iy & 255) << 8, ((iy + 1) & 255) << 8
+    a, b, c, d = _TABLE[j0 + i0], _TABLE[j0 + i1], _TABLE[j1 + i0], _TABLE[j1 + i1]
     return a + (b - a) * ux + (c - a) * uy + (a - b - c + d) * ux * uy
 
 
 def value3(x: np.ndarray, y: np.ndarray, z: np.ndarray, seed: int) -> np.ndarray:
-    """Smooth 3D value noise in [0, 1] with unit lattice spacing."""
-    xf, yf, zf = np.floor(x), np.floor(y), np.floor(z)
-    ix, iy, iz = xf.astype(np.int64), yf.astype(np.int64), zf.astype(np.int64)
-    ux, uy, uz = (_fade((v - f).astype(np.float32)) for v, f in ((x, xf), (y, yf), (z, zf)))
-    out = np.zeros(np.shape(x), dtype=np.float32)
+    """Smooth 3D value noise in [0, 1] with unit lattice spacing (z shifts the 2D table window)."""
+    ix, fx = _lattice(x, (seed * 71) % 256)
+    iy, fy = _lattice(y, (seed * 139) % 256)
+    iz, fz = _lattice(z, 0)
+    ux, uy, uz = _fade(fx), _fade(fy), _fade(fz)
+    out = np.zeros(np.shape(fx), dtype=np.float32)
     for dz, wz in ((0, 1 - uz), (1, uz)):
-        lo = hash01(ix, iy, seed, iz + dz) * (1 - ux) + hash01(ix + 1, iy, seed, iz + dz) * ux
-        hi = hash01(ix, iy + 1, seed, iz + dz) * (1 - ux) + hash01(ix + 1, iy + 1, seed, iz + dz) * ux
+        sx, sy = ix + (iz + dz) * 57, iy + (iz + dz) * 113
+        i0, i1 = sx & 255, (sx + 1) & 255
+        j0, j1 = (sy & 255) << 8, ((sy + 1) & 255) << 8
+        lo = _TABLE[j0 + i0] * (1 - ux) + _TABLE[j0 + i1] * ux
+        hi = _TABLE[j1 + i0] * (1 - ux) + _TABLE[j1 + i1] * ux
         out += (lo * (1 - uy) + hi * uy) * wz
     return out
 
@@ -70,14 +83,19 @@ def octave_weight(wavelength: float, footprint: np.ndarray) -> np.ndarray:
 def fbm2(x: np.ndarray, y: np.ndarray, seed: int, base_wavelength: float, octaves: int,
          footprint: np.ndarray, gain: float = 0.5) -> np.ndarray:
     """Band-limited fractal noise in about [-1, 1]: octave i has wavelength base / 2^i."""
+    x, y = np.asarray(x), np.asarray(y)
+    footprint = np.broadcast_to(footprint, x.shape)
     total = np.zeros(np.shape(x), dtype=np.float32)
     norm = 0.0
     amp = 1.0
     lam = base_wavelength
     for i in range(octaves):
         w = octave_weight(lam, footprint)
-        if np.any(w > 0):
+        sel = np.nonzero(w > 0)[0]
+        if len(sel) == len(w):
             total += (amp * 2.0) * w * (value2(x / lam, y / lam, seed + 101 * i) - 0.5)
+        elif len(sel):  # fine octaves: only where the footprint resolves them
+            total[sel] += (amp * 2.0) * w[sel] * (value2(x[sel] / lam, y[sel] / lam, seed + 101 * i) - 0.5)
         norm += amp
         amp *= gain
         lam *= 0.5
@@ -87,14 +105,20 @@ def fbm2(x: np.ndarray, y: np.ndarray, seed: int, base_wavelength: float, octave
 def fbm3(x: np.ndarray, y: np.ndarray, z: np.ndarray, seed: int, base_wavelength: float, octaves: int,
          footprint: np.ndarray, gain: float = 0.55) -> np.ndarray:
     """Band-limited 3D fractal noise in about [-1, 1]."""
+    x, y, z = np.asarray(x), np.asarray(y), np.asarray(z)
+    footprint = np.broadcast_to(footprint, x.shape)
     total = np.zeros(np.shape(x), dtype=np.float32)
     norm = 0.0
     amp = 1.0
     lam = base_wavelength
     for i in range(octaves):
         w = octave_weight(lam, footprint)
-        if np.any(w > 0):
+        sel = np.nonzero(w > 0)[0]
+        if len(sel) == len(w):
             total += (amp * 2.0) * w * (value3(x / lam, y / lam, z / lam, seed + 131 * i) - 0.5)
+        elif len(sel):
+            total[sel] += (amp * 2.0) * w[sel] * (
+                value3(x[sel] / lam, y[sel] / lam, z[sel] / lam, seed + 131 * i) - 0.5)
         norm += amp
         amp *= gain
         lam *= 0.5

@@ -11,6 +11,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .common import rotate
 from .prims import Prims
 from .road import Road
 from .sensors import box_corners
@@ -120,7 +121,7 @@ def prim_pairs(sensor, T_world_sensor: np.ndarray, dirs_world: np.ndarray, prims
     if prims.n_box:
         corners = box_corners(prims.center, prims.rot, prims.half)
         near = np.linalg.norm(prims.center - origin, axis=1) - np.linalg.norm(prims.half, axis=1) < reach
-        r0, r1, c0, c1 = sensor.rects((corners - origin) @ R)
+        r0, r1, c0, c1 = sensor.rects(rotate(corners - origin, R.T))
         r1 = np.where(near, r1, r0)
         ray, prim, counts = grid_pairs(r0, r1, c0, c1, sensor.grid_width)
         parts.append(_box_pairs(origin, dirs_world, prims, ray, prim, counts, t_max))
@@ -128,7 +129,7 @@ def prim_pairs(sensor, T_world_sensor: np.ndarray, dirs_world: np.ndarray, prims
         half = np.repeat(prims.sph_radius[:, None], 3, axis=1)
         corners = prims.sph_center[:, None, :] + _BOX_SIGNS[None] * half[:, None, :]
         near = np.linalg.norm(prims.sph_center - origin, axis=1) - prims.sph_radius < reach
-        r0, r1, c0, c1 = sensor.rects((corners - origin) @ R)
+        r0, r1, c0, c1 = sensor.rects(rotate(corners - origin, R.T))
         r1 = np.where(near, r1, r0)
         ray, sph, _ = grid_pairs(r0, r1, c0, c1, sensor.grid_width)
         parts.append(_sphere_pairs(origin, dirs_world, prims, ray, sph, t_max))
@@ -162,7 +163,7 @@ def with_ground(hits: Hits, road: Road, origin: np.ndarray, dirs: np.ndarray, t_
 
 def cast(sensor, T_world_sensor: np.ndarray, prims: Prims, road: Road, t_max: float):
     """Cast a sensor's whole grid: (hits, pairs, world ray directions)."""
-    dirs_world = sensor.ray_dirs() @ T_world_sensor[:3, :3].T
+    dirs_world = rotate(sensor.ray_dirs(), T_world_sensor[:3, :3])
     pairs = prim_pairs(sensor, T_world_sensor, dirs_world, prims, t_max)
     hits = nearest(pairs, sensor.n_rays)
     hits = with_ground(hits, road, T_world_sensor[:3, 3], dirs_world, t_max)

@@ -105,17 +105,17 @@ def sun_vector(appearance: dict) -> np.ndarray:
 def finish(col: np.ndarray, appearance: dict, pixel_noise: float, rng: np.random.Generator) -> np.ndarray:
     """Domain look: exposure and tint, saturation, contrast about mid grey, gamma, noise -> uint8."""
     col = col * appearance["brightness"] * np.asarray(appearance["tint"], dtype=np.float32)
-    lum = col @ np.array([0.299, 0.587, 0.114], np.float32)
+    lum = np.einsum("ni,i->n", col, np.array([0.299, 0.587, 0.114], np.float32))
     col = lum[:, None] + (col - lum[:, None]) * appearance["saturation"]
     col = (col - 0.45) * appearance["contrast"] + 0.45
     col = np.clip(col, 0.0, 1.0) ** (1.0 / appearance["gamma"])
     if pixel_noise > 0:
-        col = col + rng.normal(0.0, pixel_noise, col.shape).astype(np.float32)
+        col = col + np.float32(pixel_noise) * rng.standard_normal(col.shape, dtype=np.float32)
     return np.clip(np.round(col * 255.0), 0, 255).astype(np.uint8)
 
 
 def render_camera(cam, T_world_cam: np.ndarray, prims: Prims, view: SceneView, appearance: dict,
-                  shading: dict, render_distance: float, fog_distance: float, rng: np.random.Generator):
+                  pixel_noise: float, render_distance: float, fog_distance: float, rng: np.random.Generator):
     """Render one camera: dict(rgb (H,W,3) uint8, label uint8, instance uint16, depth float32 metres
     (0 = none)), plus the casting results (hits, pairs) for ground-truth bookkeeping."""
     hits, pairs, dirs = cast(cam, T_world_cam, prims, view.road, render_distance)
@@ -133,8 +133,8 @@ def render_camera(cam, T_world_cam: np.ndarray, prims: Prims, view: SceneView, a
     # footprint: geometric mean of the two axes of the pixel's ellipse on the surface (anisotropic filter)
     fp = rng_dist * cam.pixel_angle / np.sqrt(np.clip(cos_i, 0.05, 1.0))
     surf, inst = materials(pts, hits.prim[idx], hits.face[idx], local, half, prims, view, fp)
-    amb = shading["ambient"]
-    light = amb + (1.0 - amb) * np.clip(normal @ sun_vector(appearance), 0.0, None)
+    amb = appearance["ambient"]
+    light = amb + (1.0 - amb) * np.clip(np.einsum("ni,i->n", normal, sun_vector(appearance)), 0.0, None)
     light = np.where(surf.glass, 0.95, light).astype(np.float32)
     col = surf.albedo * light[:, None]
     fog = (1.0 - np.exp(-rng_dist / fog_distance)).astype(np.float32)
@@ -150,6 +150,6 @@ def render_camera(cam, T_world_cam: np.ndarray, prims: Prims, view: SceneView, a
     depth = np.zeros(n, np.float32)
     depth[idx] = t
     H, W = cam.height, cam.width
-    return {"rgb": finish(rgb, appearance, shading["pixel_noise"], rng).reshape(H, W, 3),
+    return {"rgb": finish(rgb, appearance, pixel_noise, rng).reshape(H, W, 3),
             "label": label.reshape(H, W), "instance": instance.reshape(H, W), "depth": depth.reshape(H, W),
             "hits": hits, "pairs": pairs}

@@ -153,7 +153,7 @@ def sky(dirs: np.ndarray, style: Style) -> np.ndarray:
     if up.any():
         scale = 1500.0 / (el[up] + 0.08)
         f = np.full(int(up.sum()), 1.0, np.float32)
-        c = noise.fbm2(d[up, 0] * scale, d[up, 1] * scale, style.seed + 21, 900.0, 5, f, gain=0.55)
+        c = noise.fbm2(d[up, 0] * scale, d[up, 1] * scale, style.seed + 21, 900.0, 4, f, gain=0.55)
         cover = np.clip((c + style.cloud_cover - 0.45) * 2.5, 0.0, 1.0) * np.clip(el[up] / 0.05, 0.0, 1.0)
         col[up] = _mix(col[up], np.array([0.93, 0.93, 0.95]), 0.85 * cover)
     return col.astype(np.float32)

@@ -1,0 +1,109 @@
+"""`write_clips`: motorway velocity clips in the TuSimple shape (McCraith ch. 3).
+
+Each clip: 40 front-camera frames at 20 fps (`clips/<n>/imgs/001.png ...`) and `annotation.json`, the
+vehicles sufficiently visible in the last frame with their tight box (visible pixels), velocity relative to
+the ego vehicle and position, both in camera ground-plane axes (x right, z forward, origin below the
+camera). `calibration.txt`: `fx fy cx cy`, then the camera height.
+"""
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from .common import SPLIT_CODES, derive_rng, pose, rotate
+from .generate import publish, temp_dir_for, write_png
+from .gt import instance_boxes, own_pixels
+from .motorway import build_motorway, motorway_state
+from .sensors import R_VEHICLE_FRONT, Camera, intrinsics
+from .shade import SceneView, render_camera
+
+
+def clip_camera(world_cfg: dict, ccfg: dict) -> Camera:
+    K = intrinsics(ccfg["width"], ccfg["height"], ccfg["hfov_deg"])
+    T = pose(R_VEHICLE_FRONT, [world_cfg["rig"]["camera_x"], 0.0, ccfg["camera_height"]])
+    return Camera("cam_front", K, ccfg["width"], ccfg["height"], T)
+
+
+def annotate(mw, state, cam: Camera, rendered: dict, ccfg: dict) -> list[dict]:
+    """Annotations of the last frame: every car sufficiently visible and within the distance range."""
+    n = len(mw.cars["size"])
+    if n == 0:
+        return []
+    own = own_pixels(rendered["pairs"], state.prims, n)
+    count, box = instance_boxes(rendered["instance"], n)
+    T_vw = np.linalg.inv(state.T_world_vehicle)
+    cam_v = cam.T_vehicle_sensor[:3, 3]
+    ego_vel = mw.ego.velocity[-1]
+    R_wv = state.T_world_vehicle[:3, :3]
+    out = []
+    for k in range(n):
+        tid = int(mw.cars["track_id"][k])
+        vis = int(count[tid])
+        if vis < ccfg["min_visible_px"] or vis < ccfg["min_visible_fraction"] * max(int(own[k]), 1):
+            continue
+        # the point of the car nearest the camera along its heading, at ground level (face centre)
+        fwd = state.car_rot[k, :, 0]
+        half_l = mw.cars["size"][k, 0] / 2
+        to_cam = state.T_world_vehicle[:3, 3] - state.car_pos[k]
+        near = state.car_pos[k] + fwd * half_l * np.sign(np.dot(fwd, to_cam))
+        p_v = rotate(near, T_vw[:3, :3]) + T_vw[:3, 3]
+        x, z = -(p_v[1] - cam_v[1]), p_v[0] - cam_v[0]
+        if not ccfg["min_distance"] <= z <= ccfg["max_distance"]:
+            continue
+        v_rel = rotate(state.car_vel[k] - ego_vel, R_wv.T)
+        x1, y1, x2, y2 = (float(v) for v in box[tid])
+        out.append({"bbox": {"top": round(y1, 2), "left": round(x1, 2), "bottom": round(y2, 2), "right": round(x2, 2)},
+                    "velocity": [round(float(-v_rel[1]), 4), round(float(v_rel[0]), 4)],
+                    "position": [round(float(x), 4), round(float(z), 4)], "track_id": tid})
+    return out
+
+
+def write_clips(world_cfg: dict, clips_cfg: dict, split: str, seed: int, out_dir: str | Path) -> dict:
+    """Render the clips of `split` (a key of clips_cfg['splits']) into out_dir; returns summary numbers."""
+    if split not in clips_cfg["splits"]:
+        raise ValueError(f"unknown clip split {split!r} (have {sorted(clips_cfg['splits'])})")
+    start = time.time()
+    spec = clips_cfg["splits"][split]
+    dom = world_cfg["domains"][clips_cfg["domain"]]
+    cam = clip_camera(world_cfg, clips_cfg)
+    out_dir = Path(out_dir)
+    tmp = temp_dir_for(out_dir)
+    counts = {"near": 0, "medium": 0, "far": 0}
+    speeds, n_ann = [], 0
+    try:
+        K = cam.K
+        (tmp / "calibration.txt").write_text(f"{K[0, 0]:.6f} {K[1, 1]:.6f} {K[0, 2]:.6f} {K[1, 2]:.6f}\n"
+                                             f"{clips_cfg['camera_height']:.4f}\n")
+        for c in range(spec["clips"]):
+            rng = derive_rng(seed, "clip", SPLIT_CODES[split], c)
+            mw = build_motorway(world_cfg, clips_cfg, dom, rng, spec["velocity_scale"])
+            view = SceneView(mw.road, mw.style, mw.cars, mw.buildings)
+            folder = tmp / "clips" / str(c + 1) / "imgs"
+            folder.mkdir(parents=True)
+            for i in range(clips_cfg["frames"]):
+                state = motorway_state(mw, i)
+                T_wc = state.T_world_vehicle @ cam.T_vehicle_sensor
+                out = render_camera(cam, T_wc, state.prims, view, dom["appearance"], world_cfg["pixel_noise"],
+                                    clips_cfg["render_distance"], world_cfg["fog_distance"], rng)
+                write_png(folder / f"{i + 1:03d}.png", out["rgb"])
+            ann = annotate(mw, state, cam, out, clips_cfg)
+            (folder.parent / "annotation.json").write_text(json.dumps(ann, indent=1))
+            for a in ann:
+                z = a["position"][1]
+                lo, hi = clips_cfg["distance_bins"]
+                counts["near" if z < lo else "medium" if z < hi else "far"] += 1
+                speeds.append(np.hypot(*a["velocity"]))
+            n_ann += len(ann)
+        publish(tmp, out_dir)
+    except BaseException:
+        import shutil
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    n = spec["clips"]
+    return {"clips": n, "annotated": n_ann, "annotated_per_clip": n_ann / max(n, 1),
+            "near": counts["near"], "medium": counts["medium"], "far": counts["far"],
+            "mean_relative_speed": float(np.mean(speeds)) if speeds else 0.0,
+            "velocity_scale": float(spec["velocity_scale"]), "seconds": time.time() - start}
