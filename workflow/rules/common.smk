@@ -8,7 +8,7 @@ config.update(_resolved)
 REGISTRY = "results/mlflow/registry.json"
 ENV = "../../envs/redsup.yaml"
 SPLITS = ("train", "test", "long")
-CLIP_SPLIT_NAMES = ("train", "test")
+CLIP_SPLIT_NAMES = list(config["velocity_clips"]["splits"])
 DET_LEVELS = ("coco", "cityscapes")
 
 
@@ -17,7 +17,7 @@ wildcard_constraints:
     scene=r"(train|test|long)_\d{3}",
     camera=r"cam_front|cam_front_right|cam_back",
     level=r"coco|cityscapes",
-    split=r"train|test",
+    split="|".join(CLIP_SPLIT_NAMES),
 
 
 def scenes_of(dataset):

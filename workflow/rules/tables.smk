@@ -24,7 +24,7 @@ rule data_summary:
 
 rule mccraith_ch3_table1:
     input:
-        clips=CLIP_SPLITS,
+        clips=expand("results/raw/clips/{split}", split=("train", "test")),
         mlflow=ancient(REGISTRY),
     output:
         md="results/tables/mccraith_ch3_table1.md",

@@ -8,6 +8,7 @@ camera). `calibration.txt`: `fx fy cx cy`, then the camera height.
 from __future__ import annotations
 
 import json
+import shutil
 import time
 from pathlib import Path
 
@@ -65,6 +66,9 @@ def write_clips(world_cfg: dict, clips_cfg: dict, split: str, seed: int, out_dir
     """Render the clips of `split` (a key of clips_cfg['splits']) into out_dir; returns summary numbers."""
     if split not in clips_cfg["splits"]:
         raise ValueError(f"unknown clip split {split!r} (have {sorted(clips_cfg['splits'])})")
+    if clips_cfg["domain"] not in world_cfg["domains"]:
+        raise ValueError(f"velocity_clips.domain {clips_cfg['domain']!r} is not a world domain "
+                         f"(have {sorted(world_cfg['domains'])})")
     start = time.time()
     spec = clips_cfg["splits"][split]
     dom = world_cfg["domains"][clips_cfg["domain"]]
@@ -99,7 +103,6 @@ def write_clips(world_cfg: dict, clips_cfg: dict, split: str, seed: int, out_dir
             n_ann += len(ann)
         publish(tmp, out_dir)
     except BaseException:
-        import shutil
         shutil.rmtree(tmp, ignore_errors=True)
         raise
     n = spec["clips"]

@@ -31,7 +31,6 @@ def building(local: np.ndarray, face: np.ndarray, half: np.ndarray, rows: np.nda
         f = fp[roof]
         v = 1.0 + 0.3 * noise.fbm2(local[roof, 0], local[roof, 1], style.seed + 71, 2.0, 7, f)
         out.albedo[roof] = np.array([0.33, 0.32, 0.31], np.float32) * v[:, None]
-        out.reflect[roof] = 0.3
     wall = ~roof
     if not wall.any():
         return out
@@ -88,7 +87,6 @@ def building(local: np.ndarray, face: np.ndarray, half: np.ndarray, rows: np.nda
     cornice = noise.stripe(w, top - 0.55, top + 1.0, f)
     col = col + (col * 1.35 - col) * cornice[:, None]
     out.albedo[wall] = np.clip(col, 0.0, 1.0)
-    out.reflect[wall] = 0.35 - 0.25 * np.maximum(win, shop_win)
     return out
 
 
@@ -106,7 +104,6 @@ def car(p: np.ndarray, face: np.ndarray, kind: np.ndarray, rows: np.ndarray, tab
     phase = table["phase"][rows]
     grime = 1.0 + 0.06 * noise.fbm2(x + 0.7 * y + phase, z + 0.3 * y, style.seed + 81, 0.7, 4, fp)
     col = paint * grime[:, None]
-    refl = 0.25 + 0.35 * paint.mean(axis=1)
     axis, positive = face // 2, (face % 2) == 1
     body = kind != KIND_CABIN
     ay = np.abs(y)
@@ -122,7 +119,6 @@ def car(p: np.ndarray, face: np.ndarray, kind: np.ndarray, rows: np.ndarray, tab
         col = col * (1 - 0.8 * arch)[:, None]
         col = col + (np.float32(0.05) - col) * tyre[:, None]
         col = col + ((0.45 + 0.15 * np.cos(5 * ang))[:, None] * np.float32(1.0) - col) * rim[:, None]
-        refl = refl + (0.06 - refl) * tyre
     sill = noise.stripe(z, -1.0, 0.2, fp) * side
     seams = (noise.stripe(x, 0.08 * L - 0.008, 0.08 * L + 0.008, fp)
              + noise.stripe(x, -0.24 * L - 0.008, -0.24 * L + 0.008, fp)) * noise.stripe(z, 0.25, hb, fp) * side
@@ -148,7 +144,6 @@ def car(p: np.ndarray, face: np.ndarray, kind: np.ndarray, rows: np.ndarray, tab
         * _box(ay, -1.0, 0.22, z, 0.18 * hb + 0.02, 0.18 * hb + 0.09, fp)
     plate_col = (0.88 - 0.75 * chars)[:, None] * np.array([1.0, 1.0, 0.95], np.float32)
     col = col + (plate_col - col) * plate[:, None]
-    refl = refl + (0.7 - refl) * np.maximum(head, tail) + (0.9 - refl) * plate
     # hood and trunk a little brighter; cabin roof paint; cabin glass
     col = col * (1 + 0.06 * (body & (face == 5)))[:, None]
     cabin = ~body
@@ -160,9 +155,7 @@ def car(p: np.ndarray, face: np.ndarray, kind: np.ndarray, rows: np.ndarray, tab
         streak = noise.fbm2(x[gl] + z[gl] * 2.0 + phase[gl], y[gl] + z[gl] * 2.0, style.seed + 83, 0.9, 3, fp[gl])
         tint = (0.1 + 0.3 * zr + 0.12 * streak)[:, None] * style.sky_horizon[None, :]
         col[gl] = style.glass[None, :] + tint
-        refl[gl] = 0.05
     out.albedo[:] = np.clip(col, 0.0, 1.0)
-    out.reflect[:] = refl
     out.glass[:] = gl
     return out
 

@@ -52,7 +52,8 @@ class FrameState:
 
 def sample_sizes(rng: np.random.Generator, n: int, size_cfg: dict) -> np.ndarray:
     mean = np.array([size_cfg["length"], size_cfg["width"], size_cfg["height"]])
-    factor = np.clip(rng.normal(1.0, size_cfg["spread"], (n, 3)), 1 - 3 * size_cfg["spread"], 1 + 3 * size_cfg["spread"])
+    spread = size_cfg["spread"]
+    factor = np.clip(rng.normal(1.0, spread, (n, 3)), 1 - 3 * spread, 1 + 3 * spread)
     return mean * factor
 
 

@@ -126,6 +126,7 @@ def build_motorway(world_cfg: dict, ccfg: dict, dom: dict, rng: np.random.Genera
     others = [(ego.s + 1.3, ego.y[-1], 4.6)]
     cars = {k: [] for k in ("size", "pos0", "vel", "target")}
     bins = np.concatenate([[ccfg["min_distance"]], ccfg["distance_bins"], [ccfg["max_distance"]]])
+    mix = np.asarray(ccfg["distance_mix"], dtype=np.float64) / np.sum(ccfg["distance_mix"])
     lane_names = ("same", "left", "right")
     lane_p = np.array([ccfg["lane_mix"][k] for k in lane_names], dtype=np.float64)
     n_target = 1 + rng.poisson(max(ccfg["vehicles_per_clip"] - 1.0, 0.0))
@@ -135,7 +136,7 @@ def build_motorway(world_cfg: dict, ccfg: dict, dom: dict, rng: np.random.Genera
         size = sample_sizes(rng, 1, world_cfg["traffic"]["car_size"])[0]
         for _ in range(30):
             if target:
-                b = rng.choice(len(ccfg["distance_mix"]), p=np.asarray(ccfg["distance_mix"]) / np.sum(ccfg["distance_mix"]))
+                b = rng.choice(len(mix), p=mix)
                 z = rng.uniform(bins[b], bins[b + 1])
                 shift = {"same": 0, "left": -1, "right": 1}[lane_names[rng.choice(3, p=lane_p / lane_p.sum())]]
             else:
@@ -179,6 +180,7 @@ def build_motorway(world_cfg: dict, ccfg: dict, dom: dict, rng: np.random.Genera
 
 
 def motorway_state(mw: Motorway, i: int) -> FrameState:
+    """Primitives and car states at frame i (cars at constant velocity)."""
     t = mw.ego.t[i]
     c = mw.cars
     x = c["pos0"][:, 0] + c["vel"][:, 0] * t
@@ -186,7 +188,8 @@ def motorway_state(mw: Motorway, i: int) -> FrameState:
     yaw = np.arctan2(c["vel"][:, 1], c["vel"][:, 0])
     pos = np.stack([x, y, mw.road.height(x, y)], axis=-1)
     rot = heading_frames(yaw, mw.road.normal(x)) if len(x) else np.zeros((0, 3, 3))
-    vel = np.stack([c["vel"][:, 0], c["vel"][:, 1], mw.road.slope(x) * c["vel"][:, 0] + mw.road.camber * c["vel"][:, 1]], -1)
+    vx, vy = c["vel"][:, 0], c["vel"][:, 1]
+    vel = np.stack([vx, vy, mw.road.slope(x) * vx + mw.road.camber * vy], -1)
     n = len(x)
     prims = Prims.concat([mw.static, car_prims(pos, rot, c["size"], np.arange(n))])
     return FrameState(prims, pos, rot, vel.reshape(n, 3), mw.ego.poses[i])

@@ -37,7 +37,8 @@ def _fade(f: np.ndarray) -> np.ndarray:
     return f * f * (3.0 - 2.0 * f)
 
 
-_TABLE = np.random.default_rng(20260101).random(256 * 256).astype(np.float32)  # lattice values
+_BASE = np.random.default_rng(20260101).random((256, 256)).astype(np.float32)  # lattice values
+_TABLE = np.pad(_BASE, ((0, 1), (0, 1)), mode="wrap").ravel()  # 257 x 257: index +1 / +257 needs no wrap
 
 
 def _lattice(x: np.ndarray, seed: int):
@@ -46,16 +47,22 @@ def _lattice(x: np.ndarray, seed: int):
     return xf.astype(np.int32) + np.int32(seed), xs - xf
 
 
+def _corners(ix: np.ndarray, iy: np.ndarray) -> np.ndarray:
+    return (iy & 255) * 257 + (ix & 255)
+
+
+def _bilinear(k: np.ndarray, ux: np.ndarray, uy: np.ndarray) -> np.ndarray:
+    a, b, c, d = _TABLE[k], _TABLE[k + 1], _TABLE[k + 257], _TABLE[k + 258]
+    ab = a + (b - a) * ux
+    return ab + (c + (d - c) * ux - ab) * uy
+
+
 def value2(x: np.ndarray, y: np.ndarray, seed: int) -> np.ndarray:
     """Smooth 2D value noise in [0, 1] with unit lattice spacing (values from a 256 x 256 table whose
     window is shifted by the seed)."""
     ix, fx = _lattice(x, (seed * 71) % 256)
     iy, fy = _lattice(y, (seed * 139) % 256)
-    ux, uy = _fade(fx), _fade(fy)
-    i0, i1 = ix & 255, (ix + 1) & 255
-    j0, j1 = (iy & 255) << 8, ((iy + 1) & 255) << 8
-    a, b, c, d = _TABLE[j0 + i0], _TABLE[j0 + i1], _TABLE[j1 + i0], _TABLE[j1 + i1]
-    return a + (b - a) * ux + (c - a) * uy + (a - b - c + d) * ux * uy
+    return _bilinear(_corners(ix, iy), _fade(fx), _fade(fy))
 
 
 def value3(x: np.ndarray, y: np.ndarray, z: np.ndarray, seed: int) -> np.ndarray:
@@ -64,65 +71,58 @@ def value3(x: np.ndarray, y: np.ndarray, z: np.ndarray, seed: int) -> np.ndarray
     iy, fy = _lattice(y, (seed * 139) % 256)
     iz, fz = _lattice(z, 0)
     ux, uy, uz = _fade(fx), _fade(fy), _fade(fz)
-    out = np.zeros(np.shape(fx), dtype=np.float32)
-    for dz, wz in ((0, 1 - uz), (1, uz)):
-        sx, sy = ix + (iz + dz) * 57, iy + (iz + dz) * 113
-        i0, i1 = sx & 255, (sx + 1) & 255
-        j0, j1 = (sy & 255) << 8, ((sy + 1) & 255) << 8
-        lo = _TABLE[j0 + i0] * (1 - ux) + _TABLE[j0 + i1] * ux
-        hi = _TABLE[j1 + i0] * (1 - ux) + _TABLE[j1 + i1] * ux
-        out += (lo * (1 - uy) + hi * uy) * wz
-    return out
+    lo = _bilinear(_corners(ix + iz * 57, iy + iz * 113), ux, uy)
+    hi = _bilinear(_corners(ix + (iz + 1) * 57, iy + (iz + 1) * 113), ux, uy)
+    return lo + (hi - lo) * uz
+
+
+OCTAVE_FADE = 2.0  # octaves over which a noise octave fades out as the footprint grows
 
 
 def octave_weight(wavelength: float, footprint: np.ndarray) -> np.ndarray:
-    """1 where the wavelength spans >= 2 footprints, 0 below one footprint, linear between."""
-    return np.clip(wavelength / np.maximum(footprint, 1e-6) - 1.0, 0.0, 1.0).astype(np.float32)
+    """1 where the wavelength spans >= 2^OCTAVE_FADE footprints, 0 below one footprint, log-linear between
+    (a gentle fade keeps a point's colour nearly constant while its distance changes)."""
+    return _weight(np.log2(wavelength), np.log2(np.maximum(footprint, 1e-6)).astype(np.float32))
+
+
+def _weight(log_wavelength: float, log_fp: np.ndarray) -> np.ndarray:
+    return np.clip((np.float32(log_wavelength) - log_fp) * np.float32(1.0 / OCTAVE_FADE), 0.0, 1.0)
+
+
+def _fbm(noise, coords, seed, step, base_wavelength, octaves, footprint, gain):
+    coords = [np.asarray(c) for c in coords]
+    shape = coords[0].shape
+    log_fp = np.log2(np.maximum(np.broadcast_to(footprint, shape), 1e-6)).astype(np.float32)
+    total = np.zeros(shape, dtype=np.float32)
+    norm = 0.0
+    amp = 1.0
+    lam = base_wavelength
+    for i in range(octaves):
+        w = _weight(np.log2(lam), log_fp)
+        sel = np.nonzero(w > 0)[0]
+        if len(sel) == len(w):
+            total += np.float32(amp * 2.0) * w * (noise(*(c / lam for c in coords), seed + step * i) - 0.5)
+        elif len(sel):  # fine octaves: only where the footprint resolves them
+            total[sel] += np.float32(amp * 2.0) * w[sel] * (
+                noise(*(c[sel] / lam for c in coords), seed + step * i) - 0.5)
+        else:
+            break  # finer octaves are resolved nowhere either
+        norm += amp
+        amp *= gain
+        lam *= 0.5
+    return total / np.float32(sum(gain ** i for i in range(octaves)))
 
 
 def fbm2(x: np.ndarray, y: np.ndarray, seed: int, base_wavelength: float, octaves: int,
          footprint: np.ndarray, gain: float = 0.5) -> np.ndarray:
     """Band-limited fractal noise in about [-1, 1]: octave i has wavelength base / 2^i."""
-    x, y = np.asarray(x), np.asarray(y)
-    footprint = np.broadcast_to(footprint, x.shape)
-    total = np.zeros(np.shape(x), dtype=np.float32)
-    norm = 0.0
-    amp = 1.0
-    lam = base_wavelength
-    for i in range(octaves):
-        w = octave_weight(lam, footprint)
-        sel = np.nonzero(w > 0)[0]
-        if len(sel) == len(w):
-            total += (amp * 2.0) * w * (value2(x / lam, y / lam, seed + 101 * i) - 0.5)
-        elif len(sel):  # fine octaves: only where the footprint resolves them
-            total[sel] += (amp * 2.0) * w[sel] * (value2(x[sel] / lam, y[sel] / lam, seed + 101 * i) - 0.5)
-        norm += amp
-        amp *= gain
-        lam *= 0.5
-    return total / np.float32(norm)
+    return _fbm(value2, (x, y), seed, 101, base_wavelength, octaves, footprint, gain)
 
 
 def fbm3(x: np.ndarray, y: np.ndarray, z: np.ndarray, seed: int, base_wavelength: float, octaves: int,
          footprint: np.ndarray, gain: float = 0.55) -> np.ndarray:
     """Band-limited 3D fractal noise in about [-1, 1]."""
-    x, y, z = np.asarray(x), np.asarray(y), np.asarray(z)
-    footprint = np.broadcast_to(footprint, x.shape)
-    total = np.zeros(np.shape(x), dtype=np.float32)
-    norm = 0.0
-    amp = 1.0
-    lam = base_wavelength
-    for i in range(octaves):
-        w = octave_weight(lam, footprint)
-        sel = np.nonzero(w > 0)[0]
-        if len(sel) == len(w):
-            total += (amp * 2.0) * w * (value3(x / lam, y / lam, z / lam, seed + 131 * i) - 0.5)
-        elif len(sel):
-            total[sel] += (amp * 2.0) * w[sel] * (
-                value3(x[sel] / lam, y[sel] / lam, z[sel] / lam, seed + 131 * i) - 0.5)
-        norm += amp
-        amp *= gain
-        lam *= 0.5
-    return total / np.float32(norm)
+    return _fbm(value3, (x, y, z), seed, 131, base_wavelength, octaves, footprint, gain)
 
 
 def stripe(coord: np.ndarray, lo: float | np.ndarray, hi: float | np.ndarray,

@@ -124,8 +124,8 @@ class Road:
             with np.errstate(divide="ignore", invalid="ignore"):
                 roots = (C / qq, qq / A)
             for t in roots:
-                x = o[0] + t * dx
                 ok = (disc >= 0) & (t > lo) & (t < t_max) & (t < best)
+                x = o[0] + np.where(ok, t, 0.0) * dx
                 if j > 0:
                     ok &= x >= x0
                 if j < last:

@@ -8,12 +8,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import cv2
 import numpy as np
 
 from . import facades, textures
-from .prims import CAR_KINDS, KIND_BARRIER, KIND_BUILDING, KIND_CABIN, KIND_POLE, KIND_RAIL, KIND_TRUNK, Prims
+from .common import rotate
+from .prims import CAR_KINDS, KIND_BARRIER, KIND_BUILDING, KIND_POLE, KIND_RAIL, KIND_TRUNK, Prims
 from .raycast import GROUND, cast
 from .road import PART_KERB, Road
+
+FILTER_PX = 1.0  # texture band limit in pixels (octaves fade out between 1 and 2 footprints)
+COS_POWER = 0.75  # footprint between the geometric mean (0.5) and the major axis (1) of the pixel ellipse
 
 
 @dataclass
@@ -60,8 +65,7 @@ def materials(points, prim, face, local, half, prims: Prims, view: SceneView, fp
     inst = np.zeros(n, np.uint16)
 
     def put(mask, surf):
-        out.albedo[mask], out.label[mask], out.reflect[mask], out.glass[mask] = (
-            surf.albedo, surf.label, surf.reflect, surf.glass)
+        out.albedo[mask], out.label[mask], out.glass[mask] = surf.albedo, surf.label, surf.glass
 
     gr = prim == GROUND
     if gr.any():
@@ -104,14 +108,27 @@ def sun_vector(appearance: dict) -> np.ndarray:
 
 def finish(col: np.ndarray, appearance: dict, pixel_noise: float, rng: np.random.Generator) -> np.ndarray:
     """Domain look: exposure and tint, saturation, contrast about mid grey, gamma, noise -> uint8."""
-    col = col * appearance["brightness"] * np.asarray(appearance["tint"], dtype=np.float32)
+    col = col * (np.float32(appearance["brightness"]) * np.asarray(appearance["tint"], dtype=np.float32))
     lum = np.einsum("ni,i->n", col, np.array([0.299, 0.587, 0.114], np.float32))
-    col = lum[:, None] + (col - lum[:, None]) * appearance["saturation"]
-    col = (col - 0.45) * appearance["contrast"] + 0.45
-    col = np.clip(col, 0.0, 1.0) ** (1.0 / appearance["gamma"])
+    col = lum[:, None] + (col - lum[:, None]) * np.float32(appearance["saturation"])
+    col = (col - np.float32(0.45)) * np.float32(appearance["contrast"]) + np.float32(0.45)
+    col = np.clip(col, 0.0, 1.0)
+    if appearance["gamma"] != 1.0:
+        col = col ** np.float32(1.0 / appearance["gamma"])
     if pixel_noise > 0:
         col = col + np.float32(pixel_noise) * rng.standard_normal(col.shape, dtype=np.float32)
     return np.clip(np.round(col * 255.0), 0, 255).astype(np.uint8)
+
+
+def sky_image(cam, T_world_cam: np.ndarray, style: textures.Style, step: int = 4) -> np.ndarray:
+    """(H*W, 3) sky colours, evaluated on a grid every `step` pixels and interpolated (the sky is smooth)."""
+    h, w = -(-cam.height // step) + 1, -(-cam.width // step) + 1
+    u, v = np.meshgrid(np.arange(w) * step, np.arange(h) * step)
+    d = np.stack([(u.ravel() - cam.K[0, 2]) / cam.K[0, 0], (v.ravel() - cam.K[1, 2]) / cam.K[1, 1],
+                  np.ones(u.size)], axis=-1)
+    coarse = textures.sky(rotate(d, T_world_cam[:3, :3]), style).reshape(h, w, 3)
+    big = cv2.resize(coarse, ((w - 1) * step + 1, (h - 1) * step + 1), interpolation=cv2.INTER_LINEAR)
+    return big[:cam.height, :cam.width].reshape(-1, 3)
 
 
 def render_camera(cam, T_world_cam: np.ndarray, prims: Prims, view: SceneView, appearance: dict,
@@ -126,23 +143,22 @@ def render_camera(cam, T_world_cam: np.ndarray, prims: Prims, view: SceneView, a
     d = dirs[idx]
     t = hits.t[idx]
     pts = origin + d * t[:, None]
-    dn = np.linalg.norm(d, axis=1)
-    rng_dist = t * dn
+    dn = np.sqrt(np.einsum("ni,ni->n", d, d))
+    rng_dist = (t * dn).astype(np.float32)
     normal, local, half = hit_geometry(pts, hits.prim[idx], hits.face[idx], prims, view.road)
-    cos_i = np.abs(np.sum(normal * d, axis=1)) / dn
-    # footprint: geometric mean of the two axes of the pixel's ellipse on the surface (anisotropic filter)
-    fp = rng_dist * cam.pixel_angle / np.sqrt(np.clip(cos_i, 0.05, 1.0))
-    surf, inst = materials(pts, hits.prim[idx], hits.face[idx], local, half, prims, view, fp)
+    cos_i = np.abs(np.einsum("ni,ni->n", normal, d)) / dn
+    fp = np.float32(FILTER_PX * cam.pixel_angle) * rng_dist / np.clip(cos_i, 0.02, 1.0).astype(np.float32) ** COS_POWER
+    surf, inst = materials(pts.astype(np.float32), hits.prim[idx], hits.face[idx], local.astype(np.float32),
+                           half.astype(np.float32), prims, view, fp)
     amb = appearance["ambient"]
     light = amb + (1.0 - amb) * np.clip(np.einsum("ni,i->n", normal, sun_vector(appearance)), 0.0, None)
     light = np.where(surf.glass, 0.95, light).astype(np.float32)
-    col = surf.albedo * light[:, None]
-    fog = (1.0 - np.exp(-rng_dist / fog_distance)).astype(np.float32)
-    col = col + (view.style.sky_horizon[None, :] - col) * fog[:, None]
+    fog = 1.0 - np.exp(-rng_dist / np.float32(fog_distance))
+    col = surf.albedo * (light * (1.0 - fog))[:, None] + view.style.sky_horizon[None, :] * fog[:, None]
     rgb = np.empty((n, 3), np.float32)
     rgb[idx] = col
-    sky = np.nonzero(~ok)[0]
-    rgb[sky] = textures.sky(dirs[sky], view.style)
+    if len(idx) < n:
+        rgb[~ok] = sky_image(cam, T_world_cam, view.style)[~ok]
     label = np.full(n, textures.SKY, np.uint8)
     label[idx] = surf.label
     instance = np.zeros(n, np.uint16)

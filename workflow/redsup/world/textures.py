@@ -1,4 +1,4 @@
-"""Ground, sky and prop materials: albedo, Cityscapes label id and LiDAR reflectance per surface point.
+"""Ground, sky and prop materials: albedo and Cityscapes label id per surface point.
 
 Every function is pure: the appearance of a point depends only on its position (world coordinates for
 static scenery, object-local for cars), the scene style and the pixel footprint (for band-limiting).
@@ -43,13 +43,11 @@ class Style:
 class Surface:
     albedo: np.ndarray   # (N, 3) float32
     label: np.ndarray    # (N,) uint8 Cityscapes label id
-    reflect: np.ndarray  # (N,) float32 LiDAR reflectance before incidence falloff
     glass: np.ndarray    # (N,) bool: LiDAR may pass through
 
 
 def surface(n: int) -> Surface:
-    return Surface(np.zeros((n, 3), np.float32), np.zeros(n, np.uint8), np.zeros(n, np.float32),
-                   np.zeros(n, bool))
+    return Surface(np.zeros((n, 3), np.float32), np.zeros(n, np.uint8), np.zeros(n, bool))
 
 
 def _mix(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
@@ -57,32 +55,38 @@ def _mix(a: np.ndarray, b: np.ndarray, w: np.ndarray) -> np.ndarray:
 
 
 def markings(x: np.ndarray, y: np.ndarray, style: Style, fp: np.ndarray) -> np.ndarray:
-    """Coverage in [0, 1] of the painted lines and zebra crossings."""
+    """Coverage in [0, 1] of the painted lines, zebra crossings and stop lines."""
     cov = np.zeros(len(x), np.float32)
     for y0, width, dash, gap in style.lane_lines:
-        c = noise.stripe(y, y0 - width / 2, y0 + width / 2, fp)
+        near = np.nonzero(np.abs(y - y0) < width / 2 + fp)[0]
+        if len(near) == 0:
+            continue
+        xn, fn = x[near], fp[near]
+        c = noise.stripe(y[near], y0 - width / 2, y0 + width / 2, fn)
         if gap > 0:
             period = dash + gap
-            phase = np.mod(x, period)
-            c = c * np.maximum(noise.stripe(phase, 0.0, dash, fp), noise.stripe(phase - period, 0.0, dash, fp))
-        cov = np.maximum(cov, c)
+            phase = np.mod(xn, period)
+            c = c * np.maximum(noise.stripe(phase, 0.0, dash, fn), noise.stripe(phase - period, 0.0, dash, fn))
+        cov[near] = np.maximum(cov[near], c)
     for xc in style.crossings:
-        along = noise.stripe(x, xc - 2.0, xc + 2.0, fp)
-        if not np.any(along > 0):
+        near = np.nonzero(np.abs(x - (xc - 0.6)) < 2.6 + fp)[0]  # the crossing [xc - 2, xc + 2] and its stop line
+        if len(near) == 0:
             continue
-        bars = noise.stripe(np.mod(y + 0.25, 1.0), 0.0, 0.5, fp)
-        stop = noise.stripe(x, xc - 3.2, xc - 2.8, fp) * (y < 0)
-        cov = np.maximum(cov, np.maximum(along * bars * (np.abs(y) < style.road_half - 0.3), stop))
+        xn, yn, fn = x[near], y[near], fp[near]
+        along = noise.stripe(xn, xc - 2.0, xc + 2.0, fn)
+        bars = noise.stripe(np.mod(yn + 0.25, 1.0), 0.0, 0.5, fn)
+        stop = noise.stripe(xn, xc - 3.2, xc - 2.8, fn) * (yn < 0)
+        cov[near] = np.maximum(cov[near], np.maximum(along * bars * (np.abs(yn) < style.road_half - 0.3), stop))
     return cov
 
 
 def asphalt(x: np.ndarray, y: np.ndarray, style: Style, fp: np.ndarray) -> np.ndarray:
     """Multi-scale mottling, light aggregate specks, repair patches, cracks and darker tyre tracks."""
     s = style.seed
-    v = 0.20 * noise.fbm2(x, y, s + 1, 3.0, 8, fp, gain=0.6) + 0.10 * noise.fbm2(x, y, s + 2, 30.0, 3, fp)
-    w_fine = noise.octave_weight(0.06, fp)
-    speck = noise.hash01(np.floor(x / 0.03).astype(np.int64), np.floor(y / 0.03).astype(np.int64), s + 3)
-    v += (0.4 * (speck > 0.86) - 0.056) * w_fine
+    v = 0.34 * noise.fbm2(x, y, s + 1, 2.0, 9, fp, gain=0.8) + 0.10 * noise.fbm2(x, y, s + 2, 30.0, 3, fp)
+    for cell, amp in ((0.03, 0.4), (0.08, 0.25)):  # light aggregate stones at two sizes
+        speck = noise.hash01(np.floor(x / cell).astype(np.int64), np.floor(y / cell).astype(np.int64), s + 3)
+        v += amp * ((speck > 0.86) - 0.14) * noise.octave_weight(2 * cell, fp)
     # repair patches: some cells of a 7 m x 2.5 m grid get a resurfaced rectangle of another tone
     cx, cy = np.floor(x / 7.0), np.floor(y / 2.5)
     pick = noise.hash01(cx.astype(np.int64), cy.astype(np.int64), s + 4)
@@ -109,13 +113,16 @@ def ground(p: np.ndarray, part: np.ndarray, style: Style, fp: np.ndarray) -> Sur
     s = style.seed
     if road.any():
         xr, yr, f = x[road], y[road], fp[road]
-        base = asphalt(xr, yr, style, f)
+        col = asphalt(xr, yr, style, f)
         cov = markings(xr, yr, style, f)
-        wear = np.clip(0.8 + 0.5 * noise.fbm2(xr, yr, s + 5, 0.8, 4, f), 0.0, 1.0) * cov
-        paint = style.marking[None, :] * (0.92 + 0.08 * noise.fbm2(xr, yr, s + 6, 0.2, 3, f))[:, None]
-        out.albedo[road] = _mix(base, paint, wear)
+        painted = np.nonzero(cov > 0)[0]
+        if len(painted):
+            xp, yp, fpp = xr[painted], yr[painted], f[painted]
+            wear = np.clip(0.8 + 0.5 * noise.fbm2(xp, yp, s + 5, 0.8, 4, fpp), 0.0, 1.0) * cov[painted]
+            paint = style.marking[None, :] * (0.92 + 0.08 * noise.fbm2(xp, yp, s + 6, 0.2, 3, fpp))[:, None]
+            col[painted] = _mix(col[painted], paint, wear)
+        out.albedo[road] = col
         out.label[road] = ROAD
-        out.reflect[road] = 0.10 + 0.03 * noise.fbm2(xr, yr, s + 7, 1.0, 3, f) + 0.65 * wear
     if walk.any():
         xw, yw, f = x[walk], y[walk], fp[walk]
         t = style.tile
@@ -125,13 +132,11 @@ def ground(p: np.ndarray, part: np.ndarray, style: Style, fp: np.ndarray) -> Sur
         v = 1.0 + 0.22 * tile + 0.12 * noise.fbm2(xw, yw, s + 12, 2.0, 7, f) - 0.45 * grout
         out.albedo[walk] = style.sidewalk[None, :] * v[:, None]
         out.label[walk] = SIDEWALK
-        out.reflect[walk] = 0.25
     if kerb.any():
         xk, zk, f = x[kerb], p[kerb, 2], fp[kerb]
         v = 0.9 + 0.15 * noise.fbm2(xk, zk * 3.0, s + 13, 1.0, 6, f) - 0.3 * noise.grid_lines(xk, 1.0, 0.01, f)
         out.albedo[kerb] = style.concrete[None, :] * v[:, None]
         out.label[kerb] = SIDEWALK
-        out.reflect[kerb] = 0.3
     if verge.any():
         xv, yv, f = x[verge], y[verge], fp[verge]
         v = 1.0 + 0.35 * noise.fbm2(xv, yv, s + 14, 3.0, 8, f)
@@ -139,7 +144,6 @@ def ground(p: np.ndarray, part: np.ndarray, style: Style, fp: np.ndarray) -> Sur
         col = _mix(style.grass[None, :].repeat(len(xv), 0), np.array([0.42, 0.38, 0.22]), 0.5 * dry)
         out.albedo[verge] = col * v[:, None]
         out.label[verge] = VEGETATION
-        out.reflect[verge] = 0.2
     return out
 
 
@@ -165,7 +169,6 @@ def pole(p: np.ndarray, local: np.ndarray, style: Style, fp: np.ndarray) -> Surf
     rings = noise.grid_lines(local[:, 2], 1.5, 0.04, fp)  # joints between pole sections
     out.albedo[:] = style.metal[None, :] * (v - 0.4 * rings)[:, None]
     out.label[:] = POLE
-    out.reflect[:] = 0.45
     return out
 
 
@@ -174,7 +177,6 @@ def trunk(p: np.ndarray, style: Style, fp: np.ndarray) -> Surface:
     v = 1.0 + 0.35 * noise.fbm2((p[:, 0] + p[:, 1]) * 6.0, p[:, 2] * 0.7, style.seed + 41, 1.0, 5, fp)
     out.albedo[:] = style.bark[None, :] * v[:, None]
     out.label[:] = VEGETATION
-    out.reflect[:] = 0.3
     return out
 
 
@@ -186,7 +188,6 @@ def crown(p: np.ndarray, style: Style, fp: np.ndarray) -> Surface:
     col = _mix(col, col * np.array([1.25, 1.1, 0.7]), np.clip(hue, 0.0, 1.0))
     out.albedo[:] = np.clip(col, 0.0, 1.0)
     out.label[:] = VEGETATION
-    out.reflect[:] = 0.22
     return out
 
 
@@ -197,11 +198,9 @@ def rail(p: np.ndarray, local: np.ndarray, style: Style, fp: np.ndarray, concret
         v = 1.0 + 0.18 * noise.fbm2(p[:, 0], p[:, 2] * 2.0 + p[:, 1], style.seed + 61, 2.0, 6, fp)
         v -= 0.25 * noise.grid_lines(p[:, 0], 6.0, 0.02, fp)
         out.albedo[:] = style.concrete[None, :] * v[:, None]
-        out.reflect[:] = 0.4
     else:
         groove = noise.grid_lines(local[:, 2], 0.11, 0.03, fp)
         v = 1.05 + 0.1 * noise.fbm2(p[:, 0], p[:, 2], style.seed + 62, 1.0, 5, fp) - 0.35 * groove
         out.albedo[:] = style.metal[None, :] * v[:, None]
-        out.reflect[:] = 0.6
     out.label[:] = POLE
     return out

@@ -1,0 +1,384 @@
+"""The embedded world: ray casting against hand-computed cases, sensor agreement, photometric consistency,
+glass pass-through, ground truth, determinism, the canonical scene format and the velocity clips."""
+import copy
+import json
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pandas as pd
+import pytest
+
+from redsup import config, geometry, sceneio
+from redsup.world import textures
+from redsup.world.clips import write_clips
+from redsup.world.common import derive_rng, pose
+from redsup.world.ego import make_ego, speed_profile
+from redsup.world.generate import depth_png, write_scene
+from redsup.world.gt import frame_rows, own_pixels
+from redsup.world.layout import build_world, frame_state, make_style
+from redsup.world.lidar import sweep
+from redsup.world.motorway import build_motorway
+from redsup.world.prims import KIND_BUILDING, Prims, car_parts, car_prims
+from redsup.world.raycast import cast
+from redsup.world.road import PART_ROAD, Road
+from redsup.world.sensors import R_VEHICLE_FRONT, Camera, Lidar, intrinsics
+from redsup.world.shade import SceneView, render_camera
+
+ROOT = Path(__file__).resolve().parents[1]
+LABELS = {7, 8, 11, 17, 21, 23, 26}
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    """The tiny profile, with small renders so the tests stay fast."""
+    c = config.load(ROOT / "config.yaml", {"profile": "tiny"})
+    world = copy.deepcopy(c["world"])
+    world["frames"] = {"train": 3, "test": 2, "long": 4}
+    world["lidar"]["azimuth_steps"] = 512
+    for dom in world["domains"].values():
+        dom["width"], dom["height"] = 192, 96
+    c["world"] = world
+    return c
+
+
+@pytest.fixture(scope="module")
+def scene(cfg, tmp_path_factory):
+    out = tmp_path_factory.mktemp("world") / "train_000"
+    summary = write_scene(cfg["world"], "world_kitti", "lyft_like", "train", 0, 11, out)
+    return out, summary
+
+
+def flat_view(cfg, cars=None, grade=(0.0, 0.0), camber=0.0):
+    """A hand-made scene: a straight road with the given knot slopes, the kitti_like style."""
+    slopes = np.array([grade[0], grade[0], grade[1], grade[1]])
+    knots = np.array([-1000.0, 0.0, 60.0, 1000.0])
+    heights = np.concatenate([[0.0], np.cumsum(0.5 * (slopes[1:] + slopes[:-1]) * np.diff(knots))])
+    heights -= heights[1]
+    road = Road(knots, slopes, heights, camber, 5.8, 0.13)
+    dom = cfg["world"]["domains"]["kitti_like"]
+    style = make_style(3, dom, cfg["world"]["road"], [[0.0, 0.12, 3.0, 6.0]], [1.75, -1.75], [], 5.8, 3.5)
+    return SceneView(road, style, cars or {}, {})
+
+
+def car_table(sizes):
+    n = len(sizes)
+    return {"track_id": np.arange(1, n + 1), "size": np.asarray(sizes, float),
+            "colour": np.tile([0.6, 0.1, 0.1], (n, 1)), "phase": np.zeros(n)}
+
+
+def camera(width=33, height=33, hfov=60.0, name="cam_front"):
+    return Camera(name, intrinsics(width, height, hfov), width, height, np.eye(4))
+
+
+# --------------------------------------------------------------------------------------- ray casting
+def test_ray_straight_down_hits_road_at_camera_height(cfg):
+    view = flat_view(cfg, grade=(0.03, -0.05))
+    x0, h = 37.0, 1.65
+    down = np.array([[0.0, -1.0, 0.0], [-1.0, 0.0, 0.0], [0.0, 0.0, -1.0]])  # columns: cam x, y, z in world
+    ground = float(view.road.height(np.array([x0]), np.array([0.0]))[0])
+    T = pose(down, [x0, 0.0, ground + h])
+    cam = camera()
+    out = render_camera(cam, T, Prims.empty(), view, cfg["world"]["domains"]["kitti_like"]["appearance"], 0.0,
+                        200.0, 350.0, derive_rng(0))
+    assert out["depth"][16, 16] == pytest.approx(h, abs=1e-9)
+    assert depth_png(out["depth"])[16, 16] == round(h * 256)
+    assert out["label"][16, 16] == textures.ROAD
+
+
+def test_sloped_ray_meets_the_quadratic_profile(cfg):
+    view = flat_view(cfg, grade=(-0.04, 0.06), camber=0.01)
+    origin = np.array([-20.0, -1.0, 1.7])
+    dirs = np.array([[1.0, 0.05, -0.02], [1.0, -0.02, 0.01], [0.3, 1.0, -0.2]])
+    t, part = view.road.intersect(origin, dirs, 400.0)
+    assert np.all(np.isfinite(t))
+    hit = origin + dirs * t[:, None]
+    assert np.allclose(hit[:, 2], view.road.height(hit[:, 0], hit[:, 1]), atol=1e-7)
+    for k in range(3):  # nothing crossed before: the ray stays above the ground up to t
+        s = np.linspace(0.0, t[k] * 0.999, 2000)
+        p = origin + dirs[k] * s[:, None]
+        assert np.all(p[:, 2] > view.road.height(p[:, 0], p[:, 1]))
+    assert part[0] == PART_ROAD  # the first ray stays between the kerbs (crossing the grade change at x = 0)
+
+
+def test_ray_at_box_faces_returns_hand_computed_distance(cfg):
+    view = flat_view(cfg)
+    cam = camera()
+    T = pose(R_VEHICLE_FRONT, [0.0, 0.0, 1.0])  # looking along world +x from (0, 0, 1)
+    for yaw, expected in ((0.0, 9.0), (np.radians(30.0), 10.0 - 1.0 / np.cos(np.radians(30.0)))):
+        c, s = np.cos(yaw), np.sin(yaw)
+        R = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+        box = Prims.boxes([[10.0, 0.0, 1.0]], R[None], [[1.0, 1.0, 1.0]], KIND_BUILDING, 0)
+        hits, _, _ = cast(cam, T, box, view.road, 200.0)
+        centre = 16 * 33 + 16
+        assert hits.prim[centre] == 0
+        assert hits.t[centre] == pytest.approx(expected, abs=1e-4)
+    lidar = Lidar("lidar_top", np.array([0.0]), 360, 120.0, np.eye(4))
+    box = Prims.boxes([[10.0, 0.0, 1.0]], np.eye(3)[None], [[1.0, 1.0, 1.0]], KIND_BUILDING, 0)
+    hits, _, _ = cast(lidar, pose(np.eye(3), [0.0, 0.0, 1.0]), box, view.road, 120.0)
+    assert hits.t[0] == pytest.approx(9.0, abs=1e-4)          # azimuth 0: the face at x = 9
+    assert hits.t[90] == np.inf and hits.prim[180] == -1      # azimuth 90, 180: nothing (no ground at 0 deg)
+
+
+# ------------------------------------------------------------------------------ photometric consistency
+def test_same_world_point_looks_the_same_from_two_poses(cfg):
+    wc = cfg["world"]
+    dom = copy.deepcopy(wc["domains"]["kitti_like"])
+    dom["width"], dom["height"] = 320, 160
+    world = build_world(wc, dom, derive_rng(5, "photo"), 4)
+    view = SceneView(world.road, world.style, world.cars, world.buildings)
+    state = frame_state(world, 0, 230.0)
+    cam = Camera("cam_front", intrinsics(320, 160, dom["hfov_deg"]), 320, 160, np.eye(4))
+    T_a = state.T_world_vehicle @ pose(R_VEHICLE_FRONT, [1.6, 0.0, 1.65])
+    T_b = T_a @ pose(np.eye(3), [0.1, 0.0, 1.0])  # 1 m forward, 0.1 m right
+    render = [render_camera(cam, T, state.prims, view, dom["appearance"], 0.0, 200.0, 350.0, derive_rng(1))
+              for T in (T_a, T_b)]
+    a, b = (r["rgb"].astype(np.float32) for r in render)
+    depth_b = render[1]["depth"]
+    v, u = np.nonzero((render[1]["label"] == textures.ROAD) & (depth_b > 4) & (depth_b < 25))
+    pts_b = geometry.backproject(cam.K, np.stack([u, v], 1).astype(float), depth_b[v, u])
+    pts_a = geometry.transform_points(np.linalg.inv(T_a) @ T_b, pts_b)
+    uv_a, _ = geometry.project(cam.K, pts_a)
+    inside = (uv_a[:, 0] > 1) & (uv_a[:, 0] < 318) & (uv_a[:, 1] > 1) & (uv_a[:, 1] < 158)
+    assert inside.sum() > 2000
+    ua, va = uv_a[inside, 0].astype(np.float32)[None], uv_a[inside, 1].astype(np.float32)[None]
+    vi, ui = v[inside], u[inside]
+    # geometry: the depth buffer of A, sampled where B's road points project, equals their depth in A
+    depth_a = cv2.remap(render[0]["depth"], ua, va, cv2.INTER_NEAREST)[0]
+    assert np.median(np.abs(depth_a - pts_a[inside, 2]) / pts_a[inside, 2]) < 0.01
+    # photometry: B's road pixels match A warped onto them far better than unwarped, and than their spread
+    warped = cv2.remap(a, ua, va, cv2.INTER_LINEAR)[0]
+    diff = np.abs(warped - b[vi, ui]).mean()
+    unwarped = np.abs(a[vi, ui] - b[vi, ui]).mean()
+    spread = b[vi, ui].std()
+    assert spread > 8.0                 # the road is textured at this resolution
+    assert diff < 0.35 * unwarped and diff < 0.2 * spread
+
+
+def test_texture_is_a_pure_function_of_position(cfg):
+    view = flat_view(cfg)
+    p = np.array([[3.0, -1.0, 0.0], [12.5, 1.7, 0.0], [40.0, 0.05, 0.0]])
+    part = np.full(3, PART_ROAD, np.int8)
+    fp = np.full(3, 0.01)
+    a = textures.ground(p, part, view.style, fp)
+    b = textures.ground(p[::-1].copy(), part, view.style, fp[::-1].copy())
+    assert np.array_equal(a.albedo, b.albedo[::-1]) and np.ptp(a.albedo[:, 0]) > 0
+
+
+# ------------------------------------------------------------------------------------- LiDAR and glass
+def _car_scene(cfg, p_pass):
+    size = np.array([[3.9, 1.6, 1.5]])
+    cars = car_table(size)
+    view = flat_view(cfg, cars=cars)
+    car = car_prims([[9.0, 0.0, 0.0]], np.eye(3)[None], size, np.array([0]))
+    wall = Prims.boxes([[22.0, 0.0, 3.0]], np.eye(3)[None], [[1.0, 8.0, 3.0]], KIND_BUILDING, 0)
+    prims = Prims.concat([car, wall])
+    lidar_cfg = dict(cfg["world"]["lidar"], glass_pass_prob=p_pass, dropout=0.0, range_noise=0.0)
+    lidar = Lidar("lidar_top", np.radians(np.linspace(2.0, -24.8, 64)), 2048, 120.0, np.eye(4))
+    out = sweep(lidar, pose(np.eye(3), [0.0, 0.0, 1.73]), prims, view, lidar_cfg, derive_rng(4))
+    _, _, cab_off, cab_half = car_parts(size)
+    shrink = 0.02  # stay clear of grazing rays at the cabin's edges
+    lo = np.array([9.0, 0.0, 0.0]) + cab_off[0] - cab_half[0] + shrink - np.array([0, 0, 1.73])
+    hi = np.array([9.0, 0.0, 0.0]) + cab_off[0] + cab_half[0] - shrink - np.array([0, 0, 1.73])
+    xyz = out["points"][:, :3].astype(np.float64)
+    rng_ = np.linalg.norm(xyz, axis=1)
+    d = xyz / rng_[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t1, t2 = lo / d, hi / d
+    t_in = np.minimum(t1, t2).max(axis=1)
+    t_out = np.maximum(t1, t2).min(axis=1)
+    through_cabin = (t_in < t_out) & (t_in > 0)
+    behind = through_cabin & (rng_ > t_out + 0.05)
+    return out, behind, through_cabin
+
+
+def test_glass_pass_probability_zero_and_one(cfg):
+    out0, behind0, through0 = _car_scene(cfg, 0.0)
+    assert through0.sum() > 50 and behind0.sum() == 0 and not out0["passed"].any()
+    out1, behind1, _ = _car_scene(cfg, 1.0)
+    assert behind1.sum() > 20 and out1["passed"].any()
+    on_wall = behind1 & (out1["points"][:, 0] > 20.9)  # through both panes, onto the wall behind
+    assert on_wall.sum() > 10 and np.all(out1["instance"][on_wall] == 0)
+    assert (out0["points"][:, 3] >= 0).all() and (out0["points"][:, 3] <= 1).all()
+
+
+def test_lidar_points_lie_on_rendered_surfaces(scene):
+    folder, _ = scene
+    K, (w, h) = sceneio.read_intrinsics(folder / "cam_front.txt")
+    extr = sceneio.read_extrinsics(folder / "extrinsics.json")
+    errors = []
+    for i in range(3):
+        pts = sceneio.read_lidar(folder / "lidar_top" / f"{i:06d}.bin")
+        T_cl = np.linalg.inv(extr["cam_front"]) @ extr["lidar_top"]
+        cam_pts = geometry.transform_points(T_cl, pts[:, :3].astype(np.float64))
+        sparse = geometry.sparse_depth_map(cam_pts, K, w, h, (0.1, 80.0))
+        depth = sceneio.read_depth_png(folder / "gt" / "depth" / "cam_front" / f"{i:06d}.png")
+        valid = (sparse > 0) & (depth > 0)
+        assert valid.sum() > 300
+        errors.append(np.abs(sparse[valid] - depth[valid]) / depth[valid])
+    err = np.concatenate(errors)
+    assert np.median(err) < 0.01 and np.mean(err < 0.05) > 0.9
+
+
+# ------------------------------------------------------------------------------------------ ground truth
+def test_occlusion_truncation_and_visible_pixels(cfg):
+    sizes = np.array([[3.9, 1.6, 1.5], [3.9, 1.6, 1.5], [3.9, 1.6, 1.5]])
+    cars = car_table(sizes)
+    view = flat_view(cfg, cars=cars)
+    pos = np.array([[10.0, 0.0, 0.0], [18.0, 1.0, 0.0], [6.0, 3.5, 0.0]])  # ahead, behind it, beside
+    rot = np.repeat(np.eye(3)[None], 3, 0)
+    prims = car_prims(pos, rot, sizes, np.arange(3))
+    cam = Camera("cam_front", intrinsics(200, 100, 81.0), 200, 100, pose(R_VEHICLE_FRONT, [1.6, 0.0, 1.65]))
+    T_wv = np.eye(4)
+    T_wc = T_wv @ cam.T_vehicle_sensor
+    out = render_camera(cam, T_wc, prims, view, cfg["world"]["domains"]["kitti_like"]["appearance"], 0.0,
+                        200.0, 350.0, derive_rng(0))
+    own = own_pixels(out["pairs"], prims, 3)
+    rows = frame_rows(0, pos, rot, np.zeros((3, 3)), cars, T_wv, cam, T_wc, out["instance"], own,
+                      np.zeros(4, int), cfg["world"]["gt"])
+    df = pd.DataFrame(rows, columns=sceneio.BOX_COLUMNS).set_index("track_id")
+    assert df.loc[1, "occlusion"] == 0 and df.loc[1, "truncation"] == 0.0
+    assert df.loc[2, "occlusion"] in (1, 2) and df.loc[2, "visible_px"] < own[1]
+    assert df.loc[3, "truncation"] > 0.2
+    for tid in (1, 2):
+        v, u = np.nonzero(out["instance"] == tid)
+        assert df.loc[tid, "visible_px"] == len(v)
+        tight = [u.min() - 0.5, v.min() - 0.5, u.max() + 0.5, v.max() + 0.5]
+        assert df.loc[tid, ["x1", "y1", "x2", "y2"]].tolist() == tight
+    assert df.loc[1, ["x", "y", "z"]].tolist() == pytest.approx([10.0, 0.0, 0.75], abs=1e-3)  # box centre
+
+
+def test_ego_motion_stops_pitch_and_pose_on_road(cfg):
+    t, v, a, s = speed_profile(derive_rng(1), 60.0, (5.0, 15.0), 0.5, (1.0, 4.0), (2.0, 5.0), 2.5, False)
+    assert (v == 0).any() and v.max() > 5.0 and np.abs(a).max() <= 2.5 + 1e-6
+    assert np.all(np.diff(s) >= 0)
+    ego_cfg = dict(cfg["world"]["ego"], body_noise=0.0)
+    view = flat_view(cfg, grade=(0.04, -0.02), camber=0.01)
+    ego = make_ego(derive_rng(2), ego_cfg, view.road, 50, 10.0, -1.75, stationary=False)
+    assert np.allclose(ego.pitch, ego_cfg["pitch_per_accel"] * ego.a)
+    origin = ego.poses[:, :3, 3]
+    assert np.allclose(origin[:, 2], view.road.height(origin[:, 0], origin[:, 1]))
+    still = make_ego(derive_rng(3), cfg["world"]["ego"], view.road, 10, 10.0, -1.75, stationary=True)
+    assert np.allclose(still.poses, still.poses[0]) and (still.v == 0).all()
+
+
+# ---------------------------------------------------------------------------------- the written scene
+def test_scene_folder_matches_the_format(scene, cfg):
+    folder, summary = scene
+    meta = sceneio.read_meta(folder)
+    dom = cfg["world"]["domains"]["lyft_like"]
+    assert meta["cameras"] == dom["cameras"] == ["cam_front", "cam_back"] and meta["lidars"] == ["lidar_top"]
+    assert meta["n_frames"] == 3 and meta["split"] == "train" and meta["domain"] == "lyft_like"
+    assert meta["fps"] == cfg["world"]["fps"] and meta["seed"] == 11 and meta["scene"] == "train_000"
+    n = meta["n_frames"]
+    for cam in meta["cameras"]:
+        K, (w, h) = sceneio.read_intrinsics(folder / f"{cam}.txt")
+        assert (w, h) == (192, 96)
+        for i, path in enumerate(sceneio.sensor_frames(folder, cam, "png", n)):
+            rgb = sceneio.read_image(path)
+            assert rgb.shape == (h, w, 3) and rgb.dtype == np.uint8 and rgb.std() > 10
+            inst = sceneio.read_label_png(folder / "gt" / "instance" / cam / path.name)
+            sem = sceneio.read_label_png(folder / "gt" / "semantic" / cam / path.name)
+            depth = sceneio.read_label_png(folder / "gt" / "depth" / cam / path.name)
+            assert inst.dtype == np.uint16 and sem.dtype == np.uint8 and depth.dtype == np.uint16
+            assert inst.shape == sem.shape == depth.shape == (h, w)
+            assert set(np.unique(sem)) <= LABELS
+            assert np.array_equal(depth == 0, sem == textures.SKY)  # every surface is nearer than 256 m
+            assert np.all(sem[inst > 0] == textures.CAR)
+    for path in sceneio.sensor_frames(folder, "lidar_top", "bin", n):
+        raw = path.read_bytes()
+        assert len(raw) % 16 == 0 and len(raw) > 16 * 10000
+        pts = np.frombuffer(raw, "<f4").reshape(-1, 4)
+        assert np.isfinite(pts).all() and np.linalg.norm(pts[:, :3], axis=1).max() < 120.5
+    extr = sceneio.read_extrinsics(folder / "extrinsics.json")
+    assert set(extr) == {"cam_front", "cam_back", "lidar_top"}
+    assert extr["cam_front"][2, 3] == pytest.approx(dom["camera_height"])
+    assert extr["cam_back"][:3, 2] == pytest.approx([-1, 0, 0])  # cam_back looks backwards
+    poses = sceneio.read_poses(folder / "ego_poses.txt")
+    assert poses.shape == (n, 4, 4)
+    for T in poses:
+        assert np.allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), atol=1e-6)
+    boxes = sceneio.read_boxes(folder / "gt" / "boxes.csv")
+    assert list(boxes.columns) == sceneio.BOX_COLUMNS and len(boxes) > 0
+    assert set(boxes["frame"]) <= set(range(n)) and boxes["occlusion"].isin([0, 1, 2, 3]).all()
+    assert boxes["truncation"].between(0, 1).all() and (boxes["cls"] == "Car").all()
+    seen = boxes[boxes["visible_px"] > 0]
+    assert len(seen) > 0 and (seen["x2"] > seen["x1"]).all() and (seen["y2"] > seen["y1"]).all()
+    assert boxes[boxes["visible_px"] == 0][["x1", "y1", "x2", "y2"]].isna().all().all()
+    inst0 = sceneio.read_label_png(folder / "gt" / "instance" / "cam_front" / "000000.png")
+    for _, row in boxes[boxes["frame"] == 0].iterrows():
+        assert row["visible_px"] == int((inst0 == row["track_id"]).sum())
+    assert boxes["l"].between(3.9 * 0.85, 3.9 * 1.15).all() and boxes["n_lidar"].sum() > 0
+    assert summary["frames"] == n and summary["lidar_points_per_sweep"] > 10000
+    assert not any(p.name.startswith(".") for p in folder.parent.iterdir())  # no temporary folder left
+
+
+def test_generation_is_deterministic(scene, cfg, tmp_path):
+    folder, _ = scene
+    again = tmp_path / "train_000"
+    write_scene(cfg["world"], "world_kitti", "lyft_like", "train", 0, 11, again)
+    files = sorted(p.relative_to(folder) for p in folder.rglob("*") if p.is_file())
+    assert files == sorted(p.relative_to(again) for p in again.rglob("*") if p.is_file())
+    for rel in files:
+        assert (folder / rel).read_bytes() == (again / rel).read_bytes(), rel
+    other = tmp_path / "train_001"
+    write_scene(cfg["world"], "world_kitti", "lyft_like", "train", 1, 11, other)
+    assert (other / "cam_front" / "000000.png").read_bytes() != (folder / "cam_front" / "000000.png").read_bytes()
+
+
+def test_misspelled_world_key_is_named():
+    with pytest.raises(config.ConfigError, match="beamz"):
+        config.load(ROOT / "config.yaml", {"world": {"lidar": {"beamz": 64}}})
+    with pytest.raises(config.ConfigError, match="velocity_scal"):
+        config.load(ROOT / "config.yaml", {"velocity_clips": {"splits": {"test": {"velocity_scal": 2.0}}}})
+
+
+def test_bad_arguments_are_named(cfg, tmp_path):
+    with pytest.raises(ValueError, match="split"):
+        write_scene(cfg["world"], "d", "kitti_like", "val", 0, 1, tmp_path / "x")
+    with pytest.raises(ValueError, match="mars_like"):
+        write_scene(cfg["world"], "d", "mars_like", "train", 0, 1, tmp_path / "x")
+    assert not any(tmp_path.iterdir())
+
+
+# ------------------------------------------------------------------------------------- velocity clips
+def test_clips_have_40_frames_and_pinhole_consistent_annotations(cfg, tmp_path):
+    world = copy.deepcopy(cfg["world"])
+    world["road"]["camber_sigma"] = 0.0
+    world["ego"].update(pitch_per_accel=0.0, roll_per_lateral_accel=0.0, body_noise=0.0)
+    clips = copy.deepcopy(cfg["velocity_clips"])
+    clips.update(grade_max=0.0, grade_sigma=0.0, background_vehicles=0.0, vehicles_per_clip=1.0,
+                 distance_mix=[1.0, 1.0, 0.0], lateral_speed_sigma=0.0, lane_change_prob=0.0, width=320, height=180)
+    clips["splits"]["train"] = {"clips": 3, "velocity_scale": 1.0}
+    summary = write_clips(world, clips, "train", 5, tmp_path / "train")
+    root = tmp_path / "train"
+    fx, fy, cx, cy = (float(v) for v in (root / "calibration.txt").read_text().split("\n")[0].split())
+    height = float((root / "calibration.txt").read_text().split("\n")[1])
+    assert height == clips["camera_height"] and fx == pytest.approx(fy)
+    n_ann = 0
+    for k in range(1, 4):
+        frames = sorted((root / "clips" / str(k) / "imgs").glob("*.png"))
+        assert [p.name for p in frames] == [f"{i:03d}.png" for i in range(1, 41)]
+        assert cv2.imread(str(frames[0])).shape == (180, 320, 3)
+        for ann in json.loads((root / "clips" / str(k) / "annotation.json").read_text()):
+            n_ann += 1
+            assert set(ann) == {"bbox", "velocity", "position", "track_id"}
+            b, (x, z) = ann["bbox"], ann["position"]
+            assert b["bottom"] == pytest.approx(cy + fy * height / z, abs=1.0)   # eq. (1) of McCraith ch.3
+            assert b["left"] - 1 <= cx + fx * x / z <= b["right"] + 1
+            assert np.hypot(*ann["velocity"]) < 8.0
+    assert n_ann >= 2 and summary["annotated"] == n_ann
+
+
+def test_abnormal_velocity_scale(cfg):
+    world, clips = cfg["world"], cfg["velocity_clips"]
+    dom = world["domains"][clips["domain"]]
+    spread = {}
+    for scale in (1.0, 3.0):
+        rel = []
+        for c in range(30):
+            mw = build_motorway(world, clips, dom, derive_rng(9, c), scale)
+            rel.extend(mw.cars["vel"][mw.target, 0] - mw.ego.v[-1])
+        spread[scale] = np.std(rel)
+    assert spread[1.0] == pytest.approx(clips["relative_speed_sigma"], rel=0.35)
+    assert spread[3.0] > 2.0 * spread[1.0]
