@@ -11,7 +11,6 @@ configfile: os.path.join(workflow.basedir, "config.yaml")
 
 
 include: "workflow/rules/common.smk"
-include: "workflow/rules/tracking.smk"
 include: "workflow/rules/world.smk"
 include: "workflow/rules/prepare.smk"
 include: "workflow/rules/detection.smk"
@@ -48,3 +47,12 @@ rule tables:
     input:
         TABLE_TARGETS,
         "results/tables/scorecard.md",
+
+
+# MLflow is the browsing layer: jobs write run records (results/runs/), imported here in one process.
+onsuccess:
+    sync_mlflow()
+
+
+onerror:
+    sync_mlflow()

@@ -18,7 +18,7 @@ import pytest
 
 pytest.importorskip("mlflow")
 
-from redsup import tracking  # noqa: E402
+from redsup import runlog, tracking  # noqa: E402
 
 WORKFLOW_DIR = Path(tracking.__file__).resolve().parents[1]
 PLAN = {
@@ -39,19 +39,24 @@ def _client(uri):
     return MlflowClient(tracking_uri=uri)
 
 
+def _run_id(client, reg, name):
+    runs = client.search_runs(list(reg["experiments"].values()), f"attributes.run_name = '{name}'")
+    assert len(runs) == 1, [r.info.run_name for r in runs]
+    return runs[0].info.run_id
+
+
 @pytest.fixture(scope="module")
 def store(tmp_path_factory):
-    """One store for the module: init, a finished child with curves/figure/table, a failed child, a
-    child killed by SIGTERM in a subprocess, a results table logged on a parent."""
+    """Records of: a finished child with curves/figure/table and a parent artifact, a failed child, a
+    child killed by SIGTERM in a subprocess; then two syncs into one store."""
     root = tmp_path_factory.mktemp("mlflow")
     old_cwd, old_env = os.getcwd(), {k: os.environ.get(k) for k in QUIET_ENV}
     os.chdir(root)  # default-relative paths (results/...) land in the temp folder
     os.environ.update(QUIET_ENV)
     try:
         uri = f"sqlite:///{root}/results/mlflow.db"
+        runs = root / "results" / "runs"
         registry_json = root / "results" / "mlflow" / "registry.json"
-        first = tracking.init_store(uri, PLAN, registry_json)
-        second = tracking.init_store(uri, PLAN, registry_json)  # idempotent
 
         import matplotlib
 
@@ -59,9 +64,11 @@ def store(tmp_path_factory):
         import matplotlib.pyplot as plt
         import pandas as pd
 
-        with tracking.child_run(registry_json, "mccraith_ch4_table2", "lr=0.1", rule="depth_adapt",
-                                wildcards={"lr": "0.1"}, config=CONFIG,
-                                params={"lr": 0.1, "steps": 10, "model": {"encoder": "resnet18"}}) as run:
+        table = root / "t.md"
+        table.write_text("| a |\n|---|\n| 1 |\n")
+        with runlog.child_run(runs / "adapt" / "lr0.1.json", "mccraith_ch4_table2", "lr=0.1",
+                              rule="depth_adapt", wildcards={"lr": "0.1"}, config=CONFIG,
+                              params={"lr": 0.1, "steps": 10, "model": {"encoder": "resnet18"}}) as run:
             for step, loss in enumerate([1.0, 0.5, 0.25]):
                 run.log_metric("loss", loss, step=step)
             run.log_curve("abs_rel_curve", [0.2, 0.15, 0.1])
@@ -71,21 +78,18 @@ def store(tmp_path_factory):
             run.log_figure(fig, "curve")
             plt.close(fig)
             run.log_table(pd.DataFrame({"x": [1, 2]}), "values")
-            ok_id = run.run_id
+            run.log_parent_artifact(table)
 
-        failed_id = {}
         with pytest.raises(ValueError, match="boom"):
-            with tracking.child_run(registry_json, "mccraith_ch3_table1", "broken", rule="r",
-                                    wildcards={}, config=CONFIG) as run:
-                failed_id["id"] = run.run_id
+            with runlog.child_run(runs / "broken.json", "mccraith_ch3_table1", "broken", rule="r",
+                                  wildcards={}, config=CONFIG):
                 raise ValueError("boom")
 
-        killed = _run_killed_child(root, registry_json)
-        table = root / "t.md"
-        table.write_text("| a |\n|---|\n| 1 |\n")
-        tracking.log_table_artifacts(registry_json, "mccraith_ch4_table2", [table], metrics={"kendall_tau": 0.5})
+        killed = _run_killed_child(root, runs / "slow.json")
+        first = tracking.sync_records(uri, PLAN, runs, registry_json)
+        second = tracking.sync_records(uri, PLAN, runs, registry_json)  # idempotent
         yield {"root": root, "uri": uri, "registry_json": registry_json, "first": first, "second": second,
-               "ok_id": ok_id, "failed_id": failed_id["id"], "killed": killed}
+               "killed": killed}
     finally:
         os.chdir(old_cwd)
         for k, v in old_env.items():
@@ -95,17 +99,17 @@ def store(tmp_path_factory):
                 os.environ[k] = v
 
 
-def _run_killed_child(root: Path, registry_json: Path) -> dict:
+def _run_killed_child(root: Path, record: Path) -> dict:
     """A child job in a subprocess, sent SIGTERM while inside child_run."""
     ready = root / "ready.txt"
     script = textwrap.dedent(f"""
         import time
         from pathlib import Path
-        from redsup import tracking
-        with tracking.child_run({str(registry_json)!r}, "mccraith_ch3_table1", "slow", rule="slow",
-                                wildcards={{"i": 1}}, config={{"profile": "tiny"}}) as run:
+        from redsup import runlog
+        with runlog.child_run({str(record)!r}, "mccraith_ch3_table1", "slow", rule="slow",
+                              wildcards={{"i": 1}}, config={{"profile": "tiny"}}) as run:
             run.log_metric("progress", 1.0)
-            Path({str(ready)!r}).write_text(run.run_id)
+            Path({str(ready)!r}).write_text("ready")
             time.sleep(120)
     """)
     env = {**os.environ, **QUIET_ENV,
@@ -124,7 +128,7 @@ def _run_killed_child(root: Path, registry_json: Path) -> dict:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
-    return {"run_id": ready.read_text(), "returncode": proc.returncode, "output": out}
+    return {"returncode": proc.returncode, "output": out}
 
 
 # ----------------------------------------------------------------------------------------- tests
@@ -137,7 +141,7 @@ def test_resolve_tracking_uri(monkeypatch):
 
 
 def test_flatten_params():
-    flat = tracking.flatten_params({"a": 1, "b": {"c": "x", "d": [1, 2]}, "e": {}})
+    flat = runlog.flatten_params({"a": 1, "b": {"c": "x", "d": [1, 2]}, "e": {}})
     assert flat == {"a": "1", "b.c": "x", "b.d": "[1, 2]", "e": "{}"}
 
 
@@ -148,6 +152,7 @@ def test_registry_json_and_idempotent_init(store):
     assert set(reg["parents"]) == {p["name"] for p in PLAN["parents"]}
     assert store["second"]["experiments"] == store["first"]["experiments"]
     assert store["second"]["parents"] == store["first"]["parents"]
+    assert (store["first"]["imported"], store["second"]["imported"]) == (3, 0)
 
 
 def test_experiments_and_parents(store):
@@ -171,7 +176,8 @@ def test_experiments_and_parents(store):
 def test_finished_child_params_metrics_steps_artifacts(store):
     client = _client(store["uri"])
     reg = store["first"]
-    run = client.get_run(store["ok_id"])
+    ok_id = _run_id(client, reg, "lr=0.1")
+    run = client.get_run(ok_id)
     assert run.info.status == "FINISHED"
     assert run.info.experiment_id == reg["experiments"]["depth"]
     tags = run.data.tags
@@ -186,27 +192,30 @@ def test_finished_child_params_metrics_steps_artifacts(store):
     assert tags["redsup.git_commit"]  # a sha or "unknown"
     assert run.data.params == {"lr": "0.1", "steps": "10", "model.encoder": "resnet18"}
     assert run.data.metrics["abs_rel"] == pytest.approx(0.097)
-    history = client.get_metric_history(store["ok_id"], "loss")
+    history = client.get_metric_history(ok_id, "loss")
     assert [(m.step, m.value) for m in sorted(history, key=lambda m: m.step)] == [(0, 1.0), (1, 0.5), (2, 0.25)]
-    assert len(client.get_metric_history(store["ok_id"], "abs_rel_curve")) == 3
-    artifacts = {a.path for a in client.list_artifacts(store["ok_id"])}
+    assert len(client.get_metric_history(ok_id, "abs_rel_curve")) == 3
+    artifacts = {a.path for a in client.list_artifacts(ok_id)}
     assert {"config.yaml", "curve.png", "values.csv"} <= artifacts
     import yaml
 
-    cfg = yaml.safe_load(Path(client.download_artifacts(store["ok_id"], "config.yaml", str(store["root"]))).read_text())
+    cfg = yaml.safe_load(Path(client.download_artifacts(ok_id, "config.yaml", str(store["root"]))).read_text())
     assert cfg == CONFIG
 
 
 def test_failed_child(store):
-    run = _client(store["uri"]).get_run(store["failed_id"])
+    client = _client(store["uri"])
+    run = client.get_run(_run_id(client, store["first"], "broken"))
     assert run.info.status == "FAILED"
+    assert run.data.tags["redsup.error"] == "ValueError: boom"
     assert run.data.tags["mlflow.parentRunId"] == store["first"]["parents"]["mccraith_ch3_table1"]
 
 
 def test_sigterm_child_is_killed(store):
     killed = store["killed"]
     assert killed["returncode"] == 128 + signal.SIGTERM, killed["output"]
-    run = _client(store["uri"]).get_run(killed["run_id"])
+    client = _client(store["uri"])
+    run = client.get_run(_run_id(client, store["first"], "slow"))
     assert run.info.status == "KILLED"
     assert run.data.metrics["progress"] == 1.0
 
@@ -221,13 +230,15 @@ def test_table_artifacts_on_finished_parent(store):
     client = _client(store["uri"])
     parent = store["first"]["parents"]["mccraith_ch4_table2"]
     assert {a.path for a in client.list_artifacts(parent, "table")} == {"table/t.md"}
-    assert client.get_run(parent).data.metrics["kendall_tau"] == 0.5
 
 
-def test_unknown_parent(store):
-    with pytest.raises(KeyError, match="no parent run named"):
-        with tracking.child_run(store["registry_json"], "nope", "x", rule="r", wildcards={}, config={}):
-            pass
+def test_record_with_unknown_parent_gets_one(tmp_path):
+    uri = f"sqlite:///{tmp_path}/m.db"
+    with runlog.child_run(tmp_path / "runs" / "x.json", "something_new", "x", rule="r", wildcards={}, config={}):
+        pass
+    reg = tracking.sync_records(uri, PLAN, tmp_path / "runs", tmp_path / "r.json",
+                                artifact_root=tmp_path / "art")
+    assert "something_new" in reg["parents"] and reg["imported"] == 1
 
 
 def test_plan_validation(tmp_path):
@@ -299,13 +310,15 @@ def test_mlflow_server_rest_api(store, tmp_path):
         parents = store["first"]["parents"]
         assert set(parents.values()) <= set(by_id)
         tags = {rid: {t["key"]: t["value"] for t in r["data"].get("tags", [])} for rid, r in by_id.items()}
-        assert tags[store["ok_id"]]["mlflow.parentRunId"] == parents["mccraith_ch4_table2"]
-        assert by_id[store["ok_id"]]["info"]["status"] == "FINISHED"
-        assert by_id[store["failed_id"]]["info"]["status"] == "FAILED"
-        assert by_id[store["killed"]["run_id"]]["info"]["status"] == "KILLED"
+        by_name = {r["info"]["run_name"]: r["info"] for r in runs}
+        ok_id = by_name["lr=0.1"]["run_id"]
+        assert tags[ok_id]["mlflow.parentRunId"] == parents["mccraith_ch4_table2"]
+        assert by_name["lr=0.1"]["status"] == "FINISHED"
+        assert by_name["broken"]["status"] == "FAILED"
+        assert by_name["slow"]["status"] == "KILLED"
         children = [rid for rid, t in tags.items() if t.get("redsup.role") == "child"]
         assert len(children) == 3
-        params = {p["key"]: p["value"] for p in by_id[store["ok_id"]]["data"].get("params", [])}
+        params = {p["key"]: p["value"] for p in by_id[ok_id]["data"].get("params", [])}
         assert params["lr"] == "0.1"
     finally:
         if proc.poll() is None:

@@ -20,7 +20,7 @@ pytestmark = pytest.mark.workflow
 
 
 def run_snakemake(workdir, *args, check=True):
-    proc = subprocess.run([*SNAKEMAKE, "--directory", str(workdir), "--config", "profile=tiny", *args],
+    proc = subprocess.run([*SNAKEMAKE, "--directory", str(workdir), *args, "--config", "profile=tiny"],
                           capture_output=True, text=True, timeout=900)
     if check and proc.returncode != 0:
         raise AssertionError(f"snakemake {' '.join(args)} failed:\n{proc.stdout[-4000:]}\n{proc.stderr[-8000:]}")
@@ -83,8 +83,8 @@ def test_lint_is_clean():
 
 
 def test_misspelled_config_key_fails_with_its_name(tmp_path):
-    proc = subprocess.run([*SNAKEMAKE, "--directory", str(tmp_path), "-n", "--config", "profile=tiny",
-                           "seeed=3"], capture_output=True, text=True, timeout=300)
+    proc = subprocess.run([*SNAKEMAKE, "--directory", str(tmp_path), "-n", "--config", "profile=tiny", "seeed=3"],
+                          capture_output=True, text=True, timeout=300)
     assert proc.returncode != 0 and "seeed" in proc.stdout + proc.stderr
 
 

@@ -1,47 +1,31 @@
-"""MLflow tracking: one experiment per stage, one parent run per table / ablation / preparation step,
-one child run per Snakemake job.
+"""MLflow as the browsing layer: one experiment per stage, one parent run per table / ablation /
+preparation step, one child run per Snakemake job, imported from the jobs' run records.
 
-Layout
-------
-* Tracking URI: ``$MLFLOW_TRACKING_URI`` if set, else ``mlflow.tracking_uri`` from the config, else
-  ``sqlite:///results/mlflow.db`` (relative to the working directory, i.e. the repository root where
-  Snakemake runs). For a local store (sqlite / file) every experiment gets the artifact location
-  ``<mlflow.artifact_root>/<stage>`` (default ``results/mlartifacts/<stage>``) so nothing lands outside
-  ``results/``. MLflow stores that location as an absolute path (it resolves local paths when the
-  experiment is created): moving the checkout keeps the metrics but not the artifact links; delete
-  ``results/mlflow.db`` and ``results/mlartifacts`` together.
-* ``init_store`` runs once, in the single rule ``mlflow_init`` that every child job depends on, because
-  parallel jobs racing on the schema creation of a fresh sqlite file fail. It writes a small JSON
-  registry (tracking URI, experiment ids, parent run ids) that child jobs read.
-* Parent runs are ended FINISHED immediately; they only group their children (MLflow nests a run under
-  another through the ``mlflow.parentRunId`` tag, whatever the parent's status).
-* Re-running ``init_store`` on an existing store is idempotent: experiments are found by name and
-  parents by their ``redsup.parent`` tag, and only missing ones are created. Children of successive
-  workflow invocations therefore accumulate under the same parent; tell them apart by the tags
-  ``redsup.config_hash``, ``redsup.git_commit`` and ``redsup.profile``.
-* ``child_run`` always uses the tracking URI written in the registry (the store that holds the
-  parents), so setting ``MLFLOW_TRACKING_URI`` between ``mlflow_init`` and a child job has no effect;
-  re-run ``mlflow_init`` instead.
+* Jobs never talk to MLflow: each writes a run record (`redsup.runlog.child_run`, the job's second
+  `log:` file). `sync_records` imports every record under `results/runs/` in one process, after every
+  Snakemake invocation (the Snakefile's `onsuccess` / `onerror` hooks) or by hand with
+  `python -m redsup.tracking` (`make mlflow-sync`). A single writer means no sqlite races, and the
+  store can be rebuilt from the records at any time.
+* Tracking URI: `$MLFLOW_TRACKING_URI` if set, else `mlflow.tracking_uri` from the config, else
+  `sqlite:///results/mlflow.db` (relative to the working directory). For a local store every experiment
+  gets the artifact location `<mlflow.artifact_root>/<stage>` (default `results/mlartifacts/<stage>`).
+* Parent runs are created FINISHED; they group their children through the `mlflow.parentRunId` tag.
+  Experiments are found by name, parents by their `redsup.parent` tag, children by `redsup.record_id`
+  (a hash of the record), so syncing twice imports nothing twice; a re-run job (new record) becomes a
+  new child run, told apart by its tags (`redsup.config_hash`, `redsup.git_commit`, `redsup.profile`).
 
-``import mlflow`` takes about 1.5 s, so it happens lazily inside the functions that need it; importing
-this module is cheap.
+`import mlflow` takes about 1.5 s, so it happens lazily inside the functions that need it.
 """
 from __future__ import annotations
 
-import contextlib
+import hashlib
 import json
 import os
-import signal
-import subprocess
-import threading
+import sys
 import time
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
-
-import yaml
-
-from redsup.config import config_hash
 
 DEFAULT_TRACKING_URI = "sqlite:///results/mlflow.db"
 DEFAULT_ARTIFACT_ROOT = "results/mlartifacts"
@@ -55,7 +39,6 @@ RUN_NAME = "mlflow.runName"
 RUN_NOTE = "mlflow.note.content"
 GIT_COMMIT = "mlflow.source.git.commit"
 
-MAX_PARAM_LENGTH = 6000           # MLflow rejects longer param values
 _LOCK_RETRIES = 12                # sqlite "database is locked" under parallel jobs
 
 
@@ -97,36 +80,6 @@ def _retry(fn, *args, **kwargs):
             time.sleep(delay)
             delay = min(delay * 2, 2.0)
     raise AssertionError("unreachable")
-
-
-def git_commit(cwd: str | Path | None = None) -> str:
-    """The checked-out commit (with ``-dirty`` when tracked files changed), or ``"unknown"``."""
-    try:
-        sha = subprocess.run(["git", "rev-parse", "HEAD"], cwd=cwd, capture_output=True, text=True,
-                             timeout=10, check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=cwd,
-                               capture_output=True, text=True, timeout=10).stdout.strip()
-        return f"{sha}-dirty" if dirty else sha
-    except (OSError, subprocess.SubprocessError):
-        return "unknown"
-
-
-def flatten_params(params: Mapping[str, Any] | None, prefix: str = "") -> dict[str, str]:
-    """Nested dicts become dotted keys; values become strings cut to MLflow's length limit."""
-    out: dict[str, str] = {}
-    for key, value in (params or {}).items():
-        name = f"{prefix}{key}"
-        if isinstance(value, Mapping) and value:
-            out.update(flatten_params(value, prefix=f"{name}."))
-        else:
-            text = value if isinstance(value, str) else json.dumps(value, default=str)
-            out[name] = text[:MAX_PARAM_LENGTH]
-    return out
-
-
-def read_store_registry(registry_json: str | Path) -> dict:
-    """The JSON written by ``init_store``."""
-    return json.loads(Path(registry_json).read_text())
 
 
 # ------------------------------------------------------------------------------------ init_store
@@ -209,224 +162,123 @@ def init_store(tracking_uri: str, plan: Mapping[str, Any], out_json: str | Path,
     return registry
 
 
-# ------------------------------------------------------------------------------------- child runs
-class RunKilled(BaseException):
-    """Raised inside a child run when the process receives SIGTERM / SIGINT."""
-
-    def __init__(self, signum: int):
-        super().__init__(f"received signal {signal.Signals(signum).name}")
-        self.signum = signum
 
 
-class RunHandle:
-    """What ``child_run`` yields: log metrics, params, figures, files and tables on one run."""
-
-    def __init__(self, client, run_id: str, experiment_id: str):
-        self.client = client
-        self.run_id = run_id
-        self.experiment_id = experiment_id
-
-    # metrics ---------------------------------------------------------------------------------
-    def log_metric(self, key: str, value: float, step: int | None = None) -> None:
-        """One value; pass ``step`` for curves (epoch, iteration, optimisation step)."""
-        _retry(self.client.log_metric, self.run_id, key, float(value), step=step or 0)
-
-    def log_metrics(self, metrics: Mapping[str, float], step: int | None = None) -> None:
-        """A dict of metrics in one batch (non-finite values are logged as MLflow allows: NaN/inf)."""
-        from mlflow.entities import Metric
-
-        now = int(time.time() * 1000)
-        batch = [Metric(key=str(k), value=float(v), timestamp=now, step=step or 0)
-                 for k, v in metrics.items()]
-        for i in range(0, len(batch), 1000):
-            _retry(self.client.log_batch, self.run_id, metrics=batch[i:i + 1000])
-
-    def log_curve(self, key: str, values, start_step: int = 0) -> None:
-        """A whole curve at once: ``values[i]`` at step ``start_step + i``."""
-        from mlflow.entities import Metric
-
-        now = int(time.time() * 1000)
-        batch = [Metric(key=key, value=float(v), timestamp=now, step=start_step + i)
-                 for i, v in enumerate(values)]
-        for i in range(0, len(batch), 1000):
-            _retry(self.client.log_batch, self.run_id, metrics=batch[i:i + 1000])
-
-    # params / tags ---------------------------------------------------------------------------
-    def log_params(self, params: Mapping[str, Any]) -> None:
-        """Flat (nested dicts are flattened to dotted keys) params; a key can only be logged once."""
-        from mlflow.entities import Param
-
-        flat = flatten_params(params)
-        batch = [Param(k, v) for k, v in flat.items()]
-        for i in range(0, len(batch), 100):
-            _retry(self.client.log_batch, self.run_id, params=batch[i:i + 100])
-
-    def set_tags(self, tags: Mapping[str, Any]) -> None:
-        for k, v in tags.items():
-            _retry(self.client.set_tag, self.run_id, k, str(v))
-
-    # artifacts -------------------------------------------------------------------------------
-    def log_figure(self, fig, name: str) -> str:
-        """A matplotlib figure saved as a PNG artifact (``name`` gets ``.png`` if it has no suffix)."""
-        if not Path(name).suffix:
-            name = f"{name}.png"
-        _retry(self.client.log_figure, self.run_id, fig, name)
-        return name
-
-    def log_artifact(self, path: str | Path, artifact_path: str | None = None) -> None:
-        """A file (or every file of a folder) copied into the run's artifacts."""
-        path = Path(path)
-        if path.is_dir():
-            _retry(self.client.log_artifacts, self.run_id, str(path), artifact_path)
-        else:
-            _retry(self.client.log_artifact, self.run_id, str(path), artifact_path)
-
-    def log_table(self, df, name: str) -> str:
-        """A pandas DataFrame as a CSV artifact (``name`` gets ``.csv`` if it has no suffix)."""
-        if not Path(name).suffix:
-            name = f"{name}.csv"
-        import pandas as pd
-
-        keep_index = not isinstance(df.index, pd.RangeIndex)
-        _retry(self.client.log_text, self.run_id, df.to_csv(index=keep_index), name)
-        return name
-
-    def log_dict(self, data: Mapping[str, Any], name: str) -> None:
-        """A dict as a JSON or YAML artifact (by the suffix of ``name``)."""
-        _retry(self.client.log_dict, self.run_id, dict(data), name)
-
-    def log_text(self, text: str, name: str) -> None:
-        _retry(self.client.log_text, self.run_id, text, name)
+# ------------------------------------------------------------------------------ importing records
+def find_records(runs_root: str | Path) -> list[Path]:
+    """Every run record (`*.json`) below `runs_root`, sorted."""
+    root = Path(runs_root)
+    return sorted(p for p in root.rglob("*.json") if p.is_file()) if root.exists() else []
 
 
-@contextlib.contextmanager
-def _signals_raise() -> Iterator[dict]:
-    """While active, SIGTERM / SIGINT raise ``RunKilled`` (main thread only; elsewhere a no-op)."""
-    state: dict = {"previous": {}}
-    if threading.current_thread() is not threading.main_thread():
-        yield state
-        return
-
-    def handler(signum, _frame):
-        raise RunKilled(signum)
-
-    for sig in (signal.SIGTERM, signal.SIGINT):
-        state["previous"][sig] = signal.signal(sig, handler)
-    try:
-        yield state
-    finally:
-        for sig, prev in state["previous"].items():
-            signal.signal(sig, prev)
+def record_id(path: str | Path) -> str:
+    return hashlib.sha1(Path(path).read_bytes()).hexdigest()
 
 
-@contextlib.contextmanager
-def _signals_deferred() -> Iterator[None]:
-    """Hold SIGTERM / SIGINT while the run is being terminated; re-deliver them afterwards."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    pending: list[int] = []
-    previous = {sig: signal.signal(sig, lambda s, _f: pending.append(s))
-                for sig in (signal.SIGTERM, signal.SIGINT)}
-    try:
-        yield
-    finally:
-        for sig, prev in previous.items():
-            signal.signal(sig, prev)
-        for sig in pending[:1]:
-            os.kill(os.getpid(), sig)
+def _import_record(client, data: dict, rid: str, experiment_id: str, parent_id: str, stage: str) -> str:
+    from mlflow.entities import Metric, Param, RunTag
 
-
-@contextlib.contextmanager
-def child_run(registry_json: str | Path, parent: str, run_name: str, *, rule: str,
-              wildcards: Mapping[str, Any], config: Mapping[str, Any],
-              params: Mapping[str, Any] | None = None) -> Iterator[RunHandle]:
-    """Open a child run under parent ``parent`` (a name in the registry), in the parent's experiment.
-
-    Tags: rule, wildcards (one tag each plus a JSON tag), config hash, git commit, profile. Logs
-    ``params`` (flattened) and the resolved ``config`` as the artifact ``config.yaml``. Yields a
-    ``RunHandle``. The run ends FINISHED on success, FAILED when the body raises (the exception
-    propagates) and KILLED on SIGTERM / SIGINT (the process then exits with status 128 + signal).
-    """
-    from mlflow.entities import RunStatus
-
-    registry = read_store_registry(registry_json)
-    try:
-        parent_id = registry["parents"][parent]
-    except KeyError:
-        raise KeyError(f"{registry_json}: no parent run named {parent!r} "
-                       f"(have {sorted(registry['parents'])}); re-run mlflow_init") from None
-    tracking_uri = registry["tracking_uri"]
-    client = _client(tracking_uri)
-    stage = registry.get("parent_stages", {}).get(parent)
-    if stage is not None and stage in registry.get("experiments", {}):
-        experiment_id = registry["experiments"][stage]
-    else:
-        experiment_id = _retry(client.get_run, parent_id).info.experiment_id
-
-    commit = git_commit()
-    wildcards = {str(k): str(v) for k, v in dict(wildcards or {}).items()}
-    tags = {
-        PARENT_RUN_ID: parent_id, TAG_ROLE: "child", TAG_PARENT: parent, TAG_STAGE: stage or "",
-        "redsup.rule": rule, "redsup.wildcards": json.dumps(wildcards, sort_keys=True),
-        "redsup.config_hash": config_hash(dict(config)), "redsup.git_commit": commit,
-        "redsup.profile": str(config.get("profile", "unknown")),
-        **{f"redsup.wildcard.{k}": v for k, v in wildcards.items()},
-    }
+    tags = {**data["tags"], PARENT_RUN_ID: parent_id, TAG_ROLE: "child", TAG_PARENT: data["parent"],
+            TAG_STAGE: stage, "redsup.record_id": rid}
+    commit = tags.get("redsup.git_commit", "unknown")
     if commit != "unknown":
         tags[GIT_COMMIT] = commit.removesuffix("-dirty")
-    run = _retry(client.create_run, experiment_id, run_name=run_name, tags=tags)
-    handle = RunHandle(client, run.info.run_id, experiment_id)
-    status = RunStatus.FAILED
-    killed: RunKilled | None = None
-    try:
-        with _signals_raise():
-            if params:
-                handle.log_params(params)
-            handle.log_text(yaml.safe_dump(_plain(config), sort_keys=True), "config.yaml")
-            yield handle
-        status = RunStatus.FINISHED
-    except RunKilled as exc:
-        status, killed = RunStatus.KILLED, exc
-    except KeyboardInterrupt:
-        status = RunStatus.KILLED
-        raise
-    finally:
-        with _signals_deferred():
-            _retry(client.set_terminated, handle.run_id, RunStatus.to_string(status))
-    if killed is not None:
-        raise SystemExit(128 + killed.signum) from killed
-
-
-def _plain(obj: Any) -> Any:
-    """Snakemake's config objects and tuples made YAML-safe."""
-    if isinstance(obj, Mapping):
-        return {str(k): _plain(v) for k, v in obj.items()}
-    if isinstance(obj, (list, tuple)):
-        return [_plain(v) for v in obj]
-    if isinstance(obj, (str, int, float, bool)) or obj is None:
-        return obj
-    return str(obj)
-
-
-# --------------------------------------------------------------------------- tables on parents
-def log_table_artifacts(registry_json: str | Path, parent: str, paths, *,
-                        artifact_path: str = "table", metrics: Mapping[str, float] | None = None,
-                        tags: Mapping[str, Any] | None = None) -> str:
-    """Attach a results table (CSV / MD / TeX / score JSON files) to the parent run ``parent``.
-
-    The parent is already FINISHED; MLflow still accepts artifacts, metrics and tags on it. Returns the
-    parent run id.
-    """
-    registry = read_store_registry(registry_json)
-    run_id = registry["parents"][parent]
-    client = _client(registry["tracking_uri"])
-    for path in paths:
-        _retry(client.log_artifact, run_id, str(path), artifact_path)
-    for key, value in (metrics or {}).items():
-        if value is not None:
-            _retry(client.log_metric, run_id, key, float(value))
-    for key, value in (tags or {}).items():
-        _retry(client.set_tag, run_id, key, str(value))
+    run = _retry(client.create_run, experiment_id, start_time=data["start_time"],
+                 run_name=data["run_name"], tags=tags)
+    run_id = run.info.run_id
+    params = [Param(k, v) for k, v in data["params"].items()]
+    for i in range(0, len(params), 100):
+        _retry(client.log_batch, run_id, params=params[i:i + 100])
+    metrics = [Metric(key=k, value=v, timestamp=t, step=s) for k, v, s, t in data["metrics"]]
+    for i in range(0, len(metrics), 1000):
+        _retry(client.log_batch, run_id, metrics=metrics[i:i + 1000])
+    for path, artifact_path in data["artifacts"]:
+        _log_path(client, run_id, path, artifact_path)
+    for path, artifact_path in data.get("parent_artifacts", []):
+        _log_path(client, parent_id, path, artifact_path)
+    end = data.get("end_time") or data["start_time"]
+    _retry(client.set_terminated, run_id, data["status"], end_time=end)
     return run_id
 
+
+def _log_path(client, run_id: str, path: str, artifact_path: str | None) -> None:
+    p = Path(path)
+    if p.is_dir():
+        _retry(client.log_artifacts, run_id, str(p), artifact_path)
+    elif p.exists():
+        _retry(client.log_artifact, run_id, str(p), artifact_path)
+    else:
+        print(f"mlflow sync: artifact {p} no longer exists, skipped", file=sys.stderr)
+
+
+def sync_records(tracking_uri: str, plan: Mapping[str, Any], runs_root: str | Path, out_json: str | Path, *,
+                 artifact_root: str | Path = DEFAULT_ARTIFACT_ROOT,
+                 experiment_prefix: str = DEFAULT_EXPERIMENT_PREFIX) -> dict:
+    """Create experiments and parents (`init_store`) and import every record not imported yet.
+
+    Returns (and writes to `out_json`) the registry plus counts: imported, already present, unreadable.
+    A record whose parent is not in the plan is imported under a parent created for it in stage `data`.
+    """
+    records = []
+    unreadable = []
+    for path in find_records(runs_root):
+        try:
+            records.append((path, json.loads(path.read_text())))
+        except (json.JSONDecodeError, OSError) as exc:
+            unreadable.append(f"{path}: {exc}")
+    plan = {"stages": dict(plan.get("stages") or {}), "parents": list(plan.get("parents") or [])}
+    known = {p["name"] for p in plan["parents"]}
+    plan["stages"].setdefault("data", "Embedded world and data preparation")
+    for name in sorted({data["parent"] for _, data in records} - known):
+        plan["parents"].append({"name": name, "stage": "data"})
+    registry = init_store(tracking_uri, plan, out_json, artifact_root=artifact_root,
+                          experiment_prefix=experiment_prefix)
+    client = _client(tracking_uri)
+    existing = set()
+    if registry["experiments"]:
+        runs = _retry(client.search_runs, list(registry["experiments"].values()),
+                      filter_string=f"tags.`{TAG_ROLE}` = 'child'", max_results=50000)
+        existing = {r.data.tags.get("redsup.record_id") for r in runs}
+    imported = 0
+    for path, data in records:
+        rid = record_id(path)
+        if rid in existing:
+            continue
+        stage = registry["parent_stages"][data["parent"]]
+        _import_record(client, data, rid, registry["experiments"][stage], registry["parents"][data["parent"]],
+                       stage)
+        imported += 1
+    registry.update({"imported": imported, "records": len(records), "unreadable": unreadable})
+    Path(out_json).write_text(json.dumps(registry, indent=2, sort_keys=True) + "\n")
+    return registry
+
+
+def sync_from_config(config: Mapping[str, Any], runs_root: str | Path = "results/runs",
+                     out_json: str | Path = "results/mlflow/registry.json") -> dict:
+    """`sync_records` with the tracking settings of a resolved config and the plan of every table."""
+    from redsup.tables import mlflow_plan
+
+    settings = config.get("mlflow", {})
+    return sync_records(resolve_tracking_uri(settings.get("tracking_uri")), mlflow_plan(), runs_root, out_json,
+                        artifact_root=settings.get("artifact_root", DEFAULT_ARTIFACT_ROOT),
+                        experiment_prefix=settings.get("experiment_prefix", DEFAULT_EXPERIMENT_PREFIX))
+
+
+def main(argv: list[str] | None = None) -> None:
+    """`python -m redsup.tracking [config.yaml]`: import every run record into MLflow."""
+    import argparse
+
+    from redsup.config import load
+
+    parser = argparse.ArgumentParser(description=main.__doc__)
+    parser.add_argument("config", nargs="?", default="config.yaml")
+    parser.add_argument("--runs", default="results/runs")
+    args = parser.parse_args(argv)
+    start = time.perf_counter()
+    out = sync_from_config(load(args.config), args.runs)
+    print(f"mlflow sync: {out['imported']} new runs of {out['records']} records into {out['tracking_uri']} "
+          f"({time.perf_counter() - start:.1f} s)")
+
+
+if __name__ == "__main__":
+    main()

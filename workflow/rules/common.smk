@@ -5,7 +5,6 @@ _resolved = redsup.config.resolve(config)
 config.clear()
 config.update(_resolved)
 
-REGISTRY = "results/mlflow/registry.json"
 ENV = "../../envs/redsup.yaml"
 SPLITS = ("train", "test", "long")
 CLIP_SPLIT_NAMES = list(config["velocity_clips"]["splits"])
@@ -58,3 +57,14 @@ TABLE_TARGETS = expand("results/tables/{table}.{ext}", table=TABLE_IDS, ext=("md
 OVERVIEW_SCENE = next((f"{d}/{s}" for d, s in ALL_SCENES if s.startswith("test")), None)
 FIGURE_TARGETS = ["results/figures/world_frame_overview.png"]
 
+
+
+def sync_mlflow():
+    """Import the run records of this invocation (and any earlier ones) into the MLflow store."""
+    import redsup.tracking
+
+    try:
+        out = redsup.tracking.sync_from_config(config)
+        print(f"MLflow: {out['imported']} new runs from {out['records']} records -> {out['tracking_uri']}")
+    except Exception as exc:  # tracking must never cost the user their results
+        print(f"MLflow sync failed ({type(exc).__name__}: {exc}); rerun `python -m redsup.tracking`")

@@ -5,11 +5,11 @@
 rule detect_instances:
     input:
         scene="results/raw/{dataset}/{scene}",
-        mlflow=ancient(REGISTRY),
     output:
         "results/prepared/{dataset}/{scene}/detections_{level}.npz",
     log:
         "results/logs/detect_instances/{dataset}/{scene}/{level}.log",
+        run="results/runs/detect_instances/{dataset}/{scene}/{level}.json",
     threads: 1
     resources:
         mem_mb=2000,
@@ -23,11 +23,11 @@ rule detect_instances:
 rule segment_road:
     input:
         scene="results/raw/{dataset}/{scene}",
-        mlflow=ancient(REGISTRY),
     output:
         "results/prepared/{dataset}/{scene}/road.npz",
     log:
         "results/logs/segment_road/{dataset}/{scene}.log",
+        run="results/runs/segment_road/{dataset}/{scene}.json",
     threads: 1
     resources:
         mem_mb=2000,
@@ -42,11 +42,11 @@ rule tracks3d:
     input:
         scene="results/raw/{dataset}/{scene}",
         detections="results/prepared/{dataset}/{scene}/detections_{level}.npz",
-        mlflow=ancient(REGISTRY),
     output:
         "results/prepared/{dataset}/{scene}/tracks3d_{level}.csv",
     log:
         "results/logs/tracks3d/{dataset}/{scene}/{level}.log",
+        run="results/runs/tracks3d/{dataset}/{scene}/{level}.json",
     threads: 1
     resources:
         mem_mb=1000,
@@ -60,11 +60,11 @@ rule tracks3d:
 rule medianflow:
     input:
         clips="results/raw/clips/{split}",
-        mlflow=ancient(REGISTRY),
     output:
         "results/prepared/clips/{split}/medianflow.npz",
     log:
         "results/logs/medianflow/{split}.log",
+        run="results/runs/medianflow/{split}.json",
     threads: 1
     resources:
         mem_mb=2000,

@@ -4,11 +4,11 @@
 rule prepare_camera:
     input:
         scene="results/raw/{dataset}/{scene}",
-        mlflow=ancient(REGISTRY),
     output:
         "results/prepared/{dataset}/{scene}/{camera}.npz",
     log:
         "results/logs/prepare_camera/{dataset}/{scene}/{camera}.log",
+        run="results/runs/prepare_camera/{dataset}/{scene}/{camera}.json",
     threads: 1
     resources:
         mem_mb=2000,
@@ -22,11 +22,11 @@ rule prepare_camera:
 rule lidar_depth:
     input:
         scene="results/raw/{dataset}/{scene}",
-        mlflow=ancient(REGISTRY),
     output:
         "results/prepared/{dataset}/{scene}/{camera}_depth.npz",
     log:
         "results/logs/lidar_depth/{dataset}/{scene}/{camera}.log",
+        run="results/runs/lidar_depth/{dataset}/{scene}/{camera}.json",
     threads: 1
     resources:
         mem_mb=2000,

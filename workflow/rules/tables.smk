@@ -4,7 +4,6 @@
 rule data_summary:
     input:
         prepared=PREPARED_TARGETS,
-        mlflow=ancient(REGISTRY),
     output:
         md="results/tables/data_summary.md",
         csv="results/tables/data_summary.csv",
@@ -12,6 +11,7 @@ rule data_summary:
         score="results/tables/data_summary.score.json",
     log:
         "results/logs/tables/data_summary.log",
+        run="results/runs/tables/data_summary.json",
     threads: 1
     resources:
         mem_mb=2000,
@@ -25,7 +25,6 @@ rule data_summary:
 rule mccraith_ch3_table1:
     input:
         clips=expand("results/raw/clips/{split}", split=("train", "test")),
-        mlflow=ancient(REGISTRY),
     output:
         md="results/tables/mccraith_ch3_table1.md",
         csv="results/tables/mccraith_ch3_table1.csv",
@@ -33,6 +32,7 @@ rule mccraith_ch3_table1:
         score="results/tables/mccraith_ch3_table1.score.json",
     log:
         "results/logs/tables/mccraith_ch3_table1.log",
+        run="results/runs/tables/mccraith_ch3_table1.json",
     threads: 1
     resources:
         mem_mb=1000,
@@ -47,11 +47,11 @@ rule world_frame_overview:
     input:
         scene=f"results/raw/{OVERVIEW_SCENE}",
         detections=f"results/prepared/{OVERVIEW_SCENE}/detections_cityscapes.npz",
-        mlflow=ancient(REGISTRY),
     output:
         "results/figures/world_frame_overview.png",
     log:
         "results/logs/figures/world_frame_overview.log",
+        run="results/runs/figures/world_frame_overview.json",
     threads: 1
     resources:
         mem_mb=2000,

@@ -4,11 +4,11 @@
 
 rule world_scene:
     input:
-        mlflow=ancient(REGISTRY),
     output:
         directory("results/raw/{dataset}/{scene}"),
     log:
         "results/logs/world_scene/{dataset}/{scene}.log",
+        run="results/runs/world_scene/{dataset}/{scene}.json",
     threads: 1
     resources:
         mem_mb=3000,
@@ -21,11 +21,11 @@ rule world_scene:
 
 rule world_clips:
     input:
-        mlflow=ancient(REGISTRY),
     output:
         directory("results/raw/clips/{split}"),
     log:
         "results/logs/world_clips/{split}.log",
+        run="results/runs/world_clips/{split}.json",
     threads: 1
     resources:
         mem_mb=3000,

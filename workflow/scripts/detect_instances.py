@@ -9,7 +9,7 @@ from redsup.prep.detections import write_detections  # noqa: E402
 from redsup.prep.figures import busiest_frame, detection_overlay  # noqa: E402
 from redsup.prep.masks_io import load_detections  # noqa: E402
 from redsup.prep.seeds import derive_seed  # noqa: E402
-from redsup.tracking import child_run  # noqa: E402
+from redsup.runlog import child_run  # noqa: E402
 
 sm = snakemake  # noqa: F821
 cfg = sm.config["detection"]
@@ -18,7 +18,7 @@ name = f"{sm.wildcards.dataset}/{sm.wildcards.scene}/{level}"
 seed = derive_seed(sm.config["seed"], "detect_instances", sm.wildcards.dataset, sm.wildcards.scene, level)
 params = {"level": level, "seed": seed, "settings": cfg["levels"][level], "points": cfg["points"],
           "score_threshold": cfg["score_threshold"], "camera": cfg["camera"]}
-with child_run(sm.input.mlflow, "data_preparation", f"detections {name}", rule=sm.rule,
+with child_run(sm.log.run, "data_preparation", f"detections {name}", rule=sm.rule,
                wildcards=dict(sm.wildcards), config=sm.config, params=params) as run:
     summary = write_detections(sm.input.scene, sm.output[0], cfg, level, seed)
     run.log_metrics(summary)

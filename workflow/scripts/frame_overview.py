@@ -4,10 +4,10 @@ import sys
 sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821
 
 from redsup.prep.overview import frame_overview  # noqa: E402
-from redsup.tracking import child_run  # noqa: E402
+from redsup.runlog import child_run  # noqa: E402
 
 sm = snakemake  # noqa: F821
-with child_run(sm.input.mlflow, "data_preparation", "frame overview", rule=sm.rule, wildcards={},
+with child_run(sm.log.run, "data_preparation", "frame overview", rule=sm.rule, wildcards={},
                config=sm.config) as run:
     fig = frame_overview(sm.input.scene, sm.input.detections,
                          depth_range=tuple(sm.config["prepare"]["depth_range"]))

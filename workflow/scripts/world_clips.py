@@ -3,11 +3,11 @@ import sys
 
 sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821
 
-from redsup.tracking import child_run  # noqa: E402
+from redsup.runlog import child_run  # noqa: E402
 from redsup.world.clips import write_clips  # noqa: E402
 
 sm = snakemake  # noqa: F821
-with child_run(sm.input.mlflow, "world", f"clips/{sm.wildcards.split}", rule=sm.rule,
+with child_run(sm.log.run, "world", f"clips/{sm.wildcards.split}", rule=sm.rule,
                wildcards=dict(sm.wildcards), config=sm.config) as run:
     summary = write_clips(sm.config["world"], sm.config["velocity_clips"], split=sm.wildcards.split,
                           seed=sm.config["seed"], out_dir=sm.output[0])

@@ -3,13 +3,13 @@ import sys
 
 sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821
 
-from redsup.tracking import child_run  # noqa: E402
+from redsup.runlog import child_run  # noqa: E402
 from redsup.world.generate import write_scene  # noqa: E402
 
 sm = snakemake  # noqa: F821
 spec = sm.config["datasets"][sm.wildcards.dataset]
 split, index = sm.wildcards.scene.split("_")
-with child_run(sm.input.mlflow, "world", f"{sm.wildcards.dataset}/{sm.wildcards.scene}", rule=sm.rule,
+with child_run(sm.log.run, "world", f"{sm.wildcards.dataset}/{sm.wildcards.scene}", rule=sm.rule,
                wildcards=dict(sm.wildcards), config=sm.config,
                params={"domain": spec["domain"], "split": split, "index": int(index)}) as run:
     summary = write_scene(sm.config["world"], dataset=sm.wildcards.dataset, domain=spec["domain"],
