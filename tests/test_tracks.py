@@ -157,7 +157,7 @@ def write_clip(split: Path, n: int, frames, vehicles: list[dict]) -> None:
 def vehicle(box, z, track_id):
     x, y, w, h = (float(v) for v in box)
     return {"bbox": {"top": y, "left": x, "bottom": y + h, "right": x + w}, "velocity": [0.5, -1.0],
-            "position": [1.0, z], "track_id": track_id}
+            "position": [z, 1.0], "track_id": track_id}  # TuSimple order: [forward, lateral]
 
 
 def test_medianflow_split_file_failures_and_bins(tmp_path):
@@ -173,7 +173,7 @@ def test_medianflow_split_file_failures_and_bins(tmp_path):
         assert d["clip"].tolist() == [2, 2, 10] and d["track_id"].tolist() == [5, 6, 1]
         assert d["bin"].tolist() == ["near", "far", "medium"] and d["bin_index"].tolist() == [0, 2, 1]
         np.testing.assert_allclose(d["velocity"][0], [0.5, -1.0])
-        np.testing.assert_allclose(d["position"][2], [1.0, 30.0])
+        np.testing.assert_allclose(d["position"][2], [30.0, 1.0])
         np.testing.assert_allclose(d["boxes"][0, -1], truth[-1], atol=1e-4)
         assert np.isfinite(d["boxes"]).all() and not d["failed"][0].any()
         failed = d["failed"][2]

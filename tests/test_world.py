@@ -363,7 +363,7 @@ def test_clips_have_40_frames_and_pinhole_consistent_annotations(cfg, tmp_path):
         for ann in json.loads((root / "clips" / str(k) / "annotation.json").read_text()):
             n_ann += 1
             assert set(ann) == {"bbox", "velocity", "position", "track_id"}
-            b, (x, z) = ann["bbox"], ann["position"]
+            b, (z, x) = ann["bbox"], ann["position"]
             assert b["bottom"] == pytest.approx(cy + fy * height / z, abs=1.0)   # eq. (1) of McCraith ch.3
             assert b["left"] - 1 <= cx + fx * x / z <= b["right"] + 1
             assert np.hypot(*ann["velocity"]) < 8.0

@@ -21,9 +21,9 @@ def clip_annotations(split_dir: str | Path) -> pd.DataFrame:
     rows = []
     for ann_path in sorted(Path(split_dir).glob("clips/*/annotation.json")):
         for vehicle in json.loads(ann_path.read_text()):
-            rows.append({"clip": ann_path.parent.name, "x": vehicle["position"][0],
-                         "z": vehicle["position"][1], "vx": vehicle["velocity"][0],
-                         "vz": vehicle["velocity"][1]})
+            z, x = vehicle["position"]  # TuSimple order: [forward, lateral]
+            vz, vx = vehicle["velocity"]
+            rows.append({"clip": ann_path.parent.name, "x": x, "z": z, "vx": vx, "vz": vz})
     return pd.DataFrame(rows, columns=["clip", "x", "z", "vx", "vz"])
 
 

@@ -5,7 +5,7 @@ through the clip; boxes are returned in forward time order. A failed update keep
 sets its `failed` flag (a failed initialisation flags every frame), so failures are visible downstream.
 
 `medianflow.npz` per clip split (N vehicles, T frames): clip (N,) int64, track_id (N,) int64, boxes
-(N, T, 4) float32 x, y, w, h, failed (N, T) bool, velocity (N, 2) [vx, vz], position (N, 2) [x, z],
+(N, T, 4) float32 x, y, w, h, failed (N, T) bool, velocity (N, 2) [vz, vx], position (N, 2) [z, x] (TuSimple order),
 distance (N,) = position z, bin (N,) str near / medium / far, bin_index (N,) int8 (0, 1, 2).
 """
 from __future__ import annotations
@@ -124,7 +124,7 @@ def track_split(split_dir: str | Path, medianflow_cfg: dict) -> tuple[dict, dict
             cols["failed"].append(failed)
             cols["velocity"].append(a["velocity"])
             cols["position"].append(a["position"])
-            cols["bin_index"].append(distance_bin(float(a["position"][1]), near, far))
+            cols["bin_index"].append(distance_bin(float(a["position"][0]), near, far))
     n = len(cols["clip"])
     position = np.array(cols["position"], dtype=np.float64).reshape(n, 2)
     bin_index = np.array(cols["bin_index"], dtype=np.int8)
@@ -133,7 +133,7 @@ def track_split(split_dir: str | Path, medianflow_cfg: dict) -> tuple[dict, dict
         "clip": np.array(cols["clip"], dtype=np.int64), "track_id": np.array(cols["track_id"], dtype=np.int64),
         "boxes": np.array(cols["boxes"], dtype=np.float32).reshape(n, n_frames, 4), "failed": failed,
         "velocity": np.array(cols["velocity"], dtype=np.float64).reshape(n, 2), "position": position,
-        "distance": position[:, 1].copy(), "bin_index": bin_index,
+        "distance": position[:, 0].copy(), "bin_index": bin_index,
         "bin": np.array([BINS[i] for i in bin_index], dtype="<U6"),
     }
     summary = {"n_vehicles": n, "n_clips": len(set(cols["clip"])),

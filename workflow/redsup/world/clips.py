@@ -57,8 +57,8 @@ def annotate(mw, state, cam: Camera, rendered: dict, ccfg: dict) -> list[dict]:
         v_rel = rotate(state.car_vel[k] - ego_vel, R_wv.T)
         x1, y1, x2, y2 = (float(v) for v in box[tid])
         out.append({"bbox": {"top": round(y1, 2), "left": round(x1, 2), "bottom": round(y2, 2), "right": round(x2, 2)},
-                    "velocity": [round(float(-v_rel[1]), 4), round(float(v_rel[0]), 4)],
-                    "position": [round(float(x), 4), round(float(z), 4)], "track_id": tid})
+                    "velocity": [round(float(v_rel[0]), 4), round(float(-v_rel[1]), 4)],
+                    "position": [round(float(z), 4), round(float(x), 4)], "track_id": tid})
     return out
 
 
@@ -96,7 +96,7 @@ def write_clips(world_cfg: dict, clips_cfg: dict, split: str, seed: int, out_dir
             ann = annotate(mw, state, cam, out, clips_cfg)
             (folder.parent / "annotation.json").write_text(json.dumps(ann, indent=1))
             for a in ann:
-                z = a["position"][1]
+                z = a["position"][0]
                 lo, hi = clips_cfg["distance_bins"]
                 counts["near" if z < lo else "medium" if z < hi else "far"] += 1
                 speeds.append(np.hypot(*a["velocity"]))
