@@ -14,7 +14,12 @@ include: "workflow/rules/common.smk"
 include: "workflow/rules/world.smk"
 include: "workflow/rules/prepare.smk"
 include: "workflow/rules/detection.smk"
-include: "workflow/rules/tables.smk"
+include: "workflow/rules/velocity.smk"
+include: "workflow/rules/depth.smk"
+include: "workflow/rules/calibration.smk"
+include: "workflow/rules/lifting.smk"
+include: "workflow/rules/lidar_detector.smk"
+include: "workflow/rules/tables.smk"  # last: it collects every stage's table and figure ids
 
 
 localrules:

@@ -1,4 +1,7 @@
 # Tables and figures that the data stage itself produces, and the scorecard gathering every table.
+# Included last: by now every stage has appended its ids to TABLE_IDS / FIGURE_IDS.
+TABLE_TARGETS = expand("results/tables/{table}.{ext}", table=TABLE_IDS, ext=("md", "csv", "tex"))
+FIGURE_TARGETS = expand("results/figures/{figure}.png", figure=FIGURE_IDS)
 
 
 rule data_summary:
