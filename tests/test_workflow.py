@@ -1,37 +1,19 @@
 """The whole DAG end to end under the tiny profile, in a temporary working directory.
 
-One module-scoped build; the tests then check outputs, the MLflow store, idempotence (a second run has
+One session-wide build (conftest.built); the tests then check outputs, the MLflow store, idempotence (a second run has
 nothing to do), lint, and that bad inputs fail their own job with a clear message.
 """
 import json
 import shutil
 import sqlite3
 import subprocess
-import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-SNAKEMAKE = [sys.executable, "-m", "snakemake", "--snakefile", str(ROOT / "Snakefile"), "--cores", "2"]
+from conftest import ROOT, SNAKEMAKE, run_snakemake
 
 pytestmark = pytest.mark.workflow
-
-
-def run_snakemake(workdir, *args, check=True):
-    proc = subprocess.run([*SNAKEMAKE, "--directory", str(workdir), *args, "--config", "profile=tiny"],
-                          capture_output=True, text=True, timeout=900)
-    if check and proc.returncode != 0:
-        raise AssertionError(f"snakemake {' '.join(args)} failed:\n{proc.stdout[-4000:]}\n{proc.stderr[-8000:]}")
-    return proc
-
-
-@pytest.fixture(scope="module")
-def built(tmp_path_factory):
-    workdir = tmp_path_factory.mktemp("tiny")
-    run_snakemake(workdir, "all")
-    return workdir
 
 
 def test_all_targets_exist(built):

@@ -1,0 +1,26 @@
+"""Shared fixtures: one tiny build of the whole workflow per test session."""
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+SNAKEMAKE = [sys.executable, "-m", "snakemake", "--snakefile", str(ROOT / "Snakefile"), "--cores", "2"]
+
+
+def run_snakemake(workdir, *args, check=True, profile="tiny"):
+    """Run the repository's workflow in `workdir` (targets and flags in `args`)."""
+    proc = subprocess.run([*SNAKEMAKE, "--directory", str(workdir), *args, "--config", f"profile={profile}"],
+                          capture_output=True, text=True, timeout=1800)
+    if check and proc.returncode != 0:
+        raise AssertionError(f"snakemake {' '.join(args)} failed:\n{proc.stdout[-4000:]}\n{proc.stderr[-8000:]}")
+    return proc
+
+
+@pytest.fixture(scope="session")
+def built(tmp_path_factory):
+    """A working directory in which `snakemake all` has run under the tiny profile."""
+    workdir = tmp_path_factory.mktemp("tiny")
+    run_snakemake(workdir, "all")
+    return workdir
