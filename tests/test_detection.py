@@ -1,5 +1,5 @@
 """Simulated 2D instance segmenter, noisy road segmenter and LiDAR point sets (redsup.prep) on a
-hand-made scene in the canonical format (docs/scene_format.md)."""
+hand-made scene in the canonical format (README, "The canonical raw-scene format")."""
 from __future__ import annotations
 
 import copy

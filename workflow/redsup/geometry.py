@@ -1,6 +1,6 @@
 """Pure camera and pose geometry (numpy). No I/O, no hidden state.
 
-Conventions (docs/scene_format.md): 4x4 homogeneous transforms T_a_b map b-coordinates to a-coordinates;
+Conventions (README, "The canonical raw-scene format"): 4x4 homogeneous transforms T_a_b map b-coordinates to a-coordinates;
 cameras are OpenCV pinholes (x right, y down, z forward) and pixel (0, 0) is the centre of the
 top-left pixel.
 """

@@ -1,4 +1,4 @@
-"""Reading the canonical raw-scene format (docs/scene_format.md), validating on read.
+"""Reading the canonical raw-scene format (README, "The canonical raw-scene format"), validating on read.
 
 Every reader raises `SceneError` naming the file and what is wrong with it, so a bad input fails its
 own Snakemake job with a message a user can act on.

@@ -1,6 +1,6 @@
 """View synthesis by back-projection, rigid transform, projection and bilinear sampling (pure torch).
 
-Conventions (docs/scene_format.md): OpenCV cameras (x right, y down, z forward), pixel (0, 0) is the centre of
+Conventions (README, "The canonical raw-scene format"): OpenCV cameras (x right, y down, z forward), pixel (0, 0) is the centre of
 the top-left pixel, so pixel u lies at normalised coordinate (2u + 1) / W - 1 for ``grid_sample`` with
 ``align_corners=False``. ``T`` (B, 4, 4) maps points of the target camera into the source camera
 (Monodepth2's ``cam_T_cam``). ``K`` is per sample, (B, 3, 3) or (B, 4, 4) (only its 3x3 block is used,

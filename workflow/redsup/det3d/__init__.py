@@ -12,5 +12,5 @@ Pure, tested library code, no I/O and no hidden state:
 - `pointsets`: padding L_m sets into batches, dropping non-finite points and empty sets with counts.
 
 Boxes are (N, 7) arrays (x, y, z, l, w, h, yaw): geometric centre in the vehicle frame (x forward, y left,
-z up), size along heading / across / vertical, yaw about +z with 0 facing +x (docs/scene_format.md).
+z up), size along heading / across / vertical, yaw about +z with 0 facing +x (README, "The canonical raw-scene format").
 """

@@ -1,7 +1,7 @@
 """Object-level views of a prepared scene for chapters 6 and 7: ground-truth frames for the KITTI-style
 evaluation, and per-detection LiDAR point sets in the vehicle frame.
 
-Boxes are (x, y, z, l, w, h, yaw) in the vehicle frame of their frame (docs/scene_format.md), the same
+Boxes are (x, y, z, l, w, h, yaw) in the vehicle frame of their frame (README, "The canonical raw-scene format"), the same
 convention as `redsup.det3d.boxes` and `redsup.det3d.kitti_eval`.
 """
 from __future__ import annotations

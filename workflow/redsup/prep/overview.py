@@ -38,7 +38,7 @@ def frame_overview(scene_dir: str | Path, detections_path: str | Path, frame: in
     axes[0, 1].set_title("renderer depth buffer (m)")
     v, u = np.nonzero(lidar)
     axes[1, 0].imshow(image)
-    sc = axes[1, 0].scatter(u, v, c=lidar[v, u], s=1.5, cmap="turbo", vmin=0, vmax=depth_range[1])
+    sc = axes[1, 0].scatter(u, v, c=lidar[v, u], s=0.6, cmap="turbo", vmin=0, vmax=depth_range[1], linewidths=0)
     rel = geometry.median_relative_error(lidar, buffer)
     axes[1, 0].set_title(f"LiDAR projected (median rel. error vs buffer {100 * rel:.2f} %)")
     fig.colorbar(sc, ax=axes[1, 0], fraction=0.03, label="depth (m)")
@@ -57,9 +57,9 @@ def frame_overview(scene_dir: str | Path, detections_path: str | Path, frame: in
         if len(pts):
             uv, _ = geometry.project(K, geometry.transform_points(T, pts[:, :3].astype(float)))
             inlier = dets["point_inlier_gt"][lo:hi]
-            axes[1, 1].scatter(uv[inlier, 0], uv[inlier, 1], s=3, c="lime")
-            axes[1, 1].scatter(uv[~inlier, 0], uv[~inlier, 1], s=3, c="red")
-    axes[1, 1].set_title("2D masks (stand-in detector) and L_m points: green on the car, red background")
+            axes[1, 1].scatter(uv[inlier, 0], uv[inlier, 1], s=0.6, c="lime", linewidths=0)
+            axes[1, 1].scatter(uv[~inlier, 0], uv[~inlier, 1], s=0.6, c="red", linewidths=0)
+    axes[1, 1].set_title("stand-in 2D masks + scores; L_m points: green on the car, red background", fontsize=9)
     for ax in axes.ravel():
         ax.set_axis_off()
     return fig

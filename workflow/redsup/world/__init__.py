@@ -1,6 +1,6 @@
 """The embedded, procedurally generated driving world.
 
-Urban scenes in the canonical raw-scene format (docs/scene_format.md) and motorway velocity clips in the
+Urban scenes in the canonical raw-scene format (README, "The canonical raw-scene format") and motorway velocity clips in the
 TuSimple shape. Modules, from the bottom up:
 
 - `common`: seeding, rotations, small maths helpers;
