@@ -11,9 +11,9 @@ BIN_EDGES = (20.0, 45.0)  # near < 20 m <= medium < 45 m <= far (TuSimple protoc
 BIN_NAMES = ("near", "medium", "far")
 
 
-def distance_bin(z: np.ndarray) -> np.ndarray:
-    """0 near (< 20 m), 1 medium (20-45 m), 2 far (>= 45 m), by ground-truth forward distance."""
-    return np.digitize(np.asarray(z, dtype=float), BIN_EDGES)
+def distance_bin(z, edges: tuple[float, float] = BIN_EDGES) -> np.ndarray:
+    """0 near (z < edges[0]), 1 medium, 2 far (z >= edges[1]), by ground-truth forward distance."""
+    return np.digitize(np.asarray(z, dtype=float), edges)
 
 
 def clip_annotations(split_dir: str | Path) -> pd.DataFrame:

@@ -16,15 +16,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from redsup.datastats import distance_bin
 from redsup.fileio import save_npz_atomic
 from redsup.sceneio import SceneError
 
 BINS = ("near", "medium", "far")
-
-
-def distance_bin(z: float, near: float, far: float) -> int:
-    """0 near (z < near), 1 medium (near <= z < far), 2 far (z >= far)."""
-    return 0 if z < near else (1 if z < far else 2)
 
 
 def track_backward(frames: list[np.ndarray], box_xywh) -> tuple[np.ndarray, np.ndarray]:
@@ -124,7 +120,7 @@ def track_split(split_dir: str | Path, medianflow_cfg: dict) -> tuple[dict, dict
             cols["failed"].append(failed)
             cols["velocity"].append(a["velocity"])
             cols["position"].append(a["position"])
-            cols["bin_index"].append(distance_bin(float(a["position"][0]), near, far))
+            cols["bin_index"].append(int(distance_bin(float(a["position"][0]), (near, far))))
     n = len(cols["clip"])
     position = np.array(cols["position"], dtype=np.float64).reshape(n, 2)
     bin_index = np.array(cols["bin_index"], dtype=np.int8)
