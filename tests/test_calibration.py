@@ -101,3 +101,44 @@ def test_gt_scale_baselines():
     scale, n = calibration.single_gt_scale(pairs + [(np.zeros_like(gt), gt)])
     assert (scale, n) == (pytest.approx(20.0), 3)
     assert calibration.per_frame_gt_scale(np.zeros_like(gt), gt) == (None, "no valid ground-truth pixel")
+
+
+def test_road_selection_length_and_width_by_hand():
+    """Flat road Y = 1 m seen by a 10 x 10 camera (f = 10, cx = 4.5, horizon above the image):
+    pixel (u, v) lies at Z = 10 / (v + 0.5), X = (u - 4.5) / (v + 0.5)."""
+    K_small = np.array([[10.0, 0.0, 4.5], [0.0, 10.0, -0.5], [0.0, 0.0, 1.0]])
+    road = np.ones((10, 10), bool)
+    sel = calibration.road_selection(road, K_small, 1.0, max_length=3.0, max_width=0.9)
+    expected = np.zeros((10, 10), bool)  # row 2 is at Z = 4 m: too far
+    expected[3, 2:8] = True  # Z = 2.86 m: |u - 4.5| < 0.9 * 3.5 = 3.15
+    expected[4, 1:9] = True  # Z = 2.22 m: |u - 4.5| < 0.9 * 4.5 = 4.05
+    expected[5:, :] = True   # Z <= 1.82 m: |u - 4.5| < 0.9 * 5.5 = 4.95 holds for every column
+    assert np.array_equal(sel, expected)
+    # the length limit alone: Z < 5 m from v + 0.5 > 2, i.e. rows 2..9; a wide box keeps every column
+    sel = calibration.road_selection(road, K_small, 1.0, max_length=5.0, max_width=100.0)
+    assert np.array_equal(sel.any(axis=1), np.arange(10) >= 2) and sel[2:].all()
+    # pixels not labelled road are never selected
+    road[6, 3] = False
+    assert not calibration.road_selection(road, K_small, 1.0, max_length=3.0, max_width=0.9)[6, 3]
+
+
+def test_degenerate_plane_reasons():
+    raw = _road_depth(_unit([0.0, -1.0, 0.0]), H_CAM)
+    road = np.isfinite(raw)
+    road[: SIZE[0] // 2 + 2] = False
+    raw = np.where(road, raw, 50.0) / 10.0
+    # one pixel column: the selected points are collinear
+    column = np.zeros(SIZE, bool)
+    column[40:, 64] = True
+    scale, reason = calibration.calibrate_frame(raw, column, K, H_CAM, min_points=5)
+    assert scale is None and reason.startswith("degenerate road plane")
+    # a plane through the camera centre (zero offset) is degenerate too
+    plane = calibration.Plane(np.array([0.0, -1.0, 0.0]), 0.0, np.ones(1, bool))
+    with pytest.raises(ValueError, match="positive"):
+        calibration.scale_from_camera_height(plane, H_CAM)
+    # optional tilt limit: a wall facing the camera is not a road
+    wall = np.full(SIZE, 10.0)
+    scale, reason = calibration.calibrate_frame(wall, np.ones(SIZE, bool), K, H_CAM, max_tilt_deg=20.0)
+    assert scale is None and "from the camera's vertical" in reason
+    assert calibration.plane_tilt_deg(np.array([0.0, -1.0, 0.0])) == pytest.approx(0.0)
+    assert calibration.plane_tilt_deg(np.array([0.0, 0.0, 1.0])) == pytest.approx(90.0)

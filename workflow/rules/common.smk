@@ -1,4 +1,7 @@
 # Configuration resolution and the lists of targets, derived from config as data.
+import re
+
+import redsup.adapters
 import redsup.config
 
 _resolved = redsup.config.resolve(config)
@@ -11,25 +14,51 @@ CLIP_SPLIT_NAMES = list(config["velocity_clips"]["splits"])
 DET_LEVELS = ("coco", "cityscapes")
 
 
+# which rule writes results/raw/{dataset}/{scene} (world_scene or adapt_scene) and results/raw/clips/{split}
+# (world_clips or adapt_clips): each rule's wildcard is restricted to the names of its kind
+
+
+def _names_regex(names):
+    return "|".join(re.escape(n) for n in names) or "(?!)"
+
+
+WORLD_DATASETS = [d for d, spec in config["datasets"].items() if spec["kind"] == "world"]
+ADAPTER_DATASETS = [d for d, spec in config["datasets"].items() if spec["kind"] != "world"]
+CLIP_SOURCE = config["velocity_clips"].get("source")
+SOURCE_CLIP_SPLITS = [s for s in CLIP_SPLIT_NAMES if CLIP_SOURCE and s in CLIP_SOURCE["splits"]]
+WORLD_CLIP_SPLITS = [s for s in CLIP_SPLIT_NAMES if s not in SOURCE_CLIP_SPLITS]
+if CLIP_SOURCE and set(CLIP_SOURCE["splits"]) - set(CLIP_SPLIT_NAMES):
+    raise redsup.config.ConfigError(
+        f"config.yaml: velocity_clips.source.splits names {sorted(set(CLIP_SOURCE['splits']) - set(CLIP_SPLIT_NAMES))}, "
+        f"which are not clip splits (velocity_clips.splits: {CLIP_SPLIT_NAMES})")
+
+
 wildcard_constraints:
     dataset=r"[A-Za-z0-9_]+",
-    scene=r"(train|test|long)_\d{3}",
+    scene=r"(train|test|long)_[A-Za-z0-9_]+",
     camera=r"cam_front|cam_front_right|cam_back",
     level=r"coco|cityscapes",
     split="|".join(CLIP_SPLIT_NAMES),
 
 
 def scenes_of(dataset):
-    """Scene ids of one dataset (kind=world: <split>_<index>)."""
-    counts = config["datasets"][dataset].get("scenes", {})
+    """Scene ids of one dataset (kind=world: <split>_<index>; real datasets: <split>_<source name>, listed
+    from the dataset's folder and split files when the workflow is parsed)."""
+    spec = config["datasets"][dataset]
+    if spec["kind"] != "world":
+        return redsup.adapters.scene_ids(dataset, spec)
+    counts = spec.get("scenes", {})
     return [f"{split}_{i:03d}" for split in SPLITS for i in range(counts.get(split, 0))]
 
 
 def cameras_of(dataset):
-    """Cameras prepared for a dataset: the configured ones its domain renders."""
+    """Cameras prepared for a dataset: the configured ones its domain renders (or the real dataset has)."""
     spec = config["datasets"][dataset]
-    rendered = config["world"]["domains"][spec["domain"]]["cameras"]
-    return [c for c in config["prepare"]["cameras"] if c in rendered]
+    if spec["kind"] != "world":
+        present = redsup.adapters.cameras(spec)
+    else:
+        present = config["world"]["domains"][spec["domain"]]["cameras"]
+    return [c for c in config["prepare"]["cameras"] if c in present]
 
 
 ALL_SCENES = [(d, s) for d in config["datasets"] for s in scenes_of(d)]

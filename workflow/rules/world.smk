@@ -6,6 +6,8 @@ rule world_scene:
     input:
     output:
         directory("results/raw/{dataset}/{scene}"),
+    wildcard_constraints:
+        dataset=_names_regex(WORLD_DATASETS),  # real datasets: adapt_scene (adapters.smk)
     log:
         "results/logs/world_scene/{dataset}/{scene}.log",
         run="results/runs/world_scene/{dataset}/{scene}.json",
@@ -23,6 +25,8 @@ rule world_clips:
     input:
     output:
         directory("results/raw/clips/{split}"),
+    wildcard_constraints:
+        split=_names_regex(WORLD_CLIP_SPLITS),  # splits of velocity_clips.source: adapt_clips (adapters.smk)
     log:
         "results/logs/world_clips/{split}.log",
         run="results/runs/world_clips/{split}.json",

@@ -116,18 +116,32 @@ def scale_from_camera_height(plane: Plane, camera_height: float) -> float:
     return float(camera_height) / float(plane.offset)
 
 
+def plane_tilt_deg(normal: np.ndarray) -> float:
+    """Angle (degrees) between a plane normal and the camera's up axis -y (either orientation)."""
+    n = np.asarray(normal, dtype=np.float64)
+    return float(np.degrees(np.arccos(min(1.0, abs(float(n[1])) / max(float(np.linalg.norm(n)), 1e-300)))))
+
+
 def calibrate_frame(depth: np.ndarray, road_mask: np.ndarray, K: np.ndarray, camera_height: float, *,
                     max_length: float = 30.0, max_width: float = 3.0, min_points: int = 20, n_iter: int = 300,
-                    seed: int = 0) -> tuple[float | None, str | None]:
-    """Our method for one frame: (scale, None) or (None, reason) when no plane can be fitted."""
+                    seed: int = 0, max_tilt_deg: float | None = None) -> tuple[float | None, str | None]:
+    """Our method for one frame: (scale, None) or (None, reason) when no plane can be fitted.
+
+    Reasons: too few selected road points, a degenerate fit (collinear points, zero offset: the plane passes
+    through the camera) or, with ``max_tilt_deg``, a plane whose normal is tilted more than that from the
+    camera's vertical (a wall or a car fitted instead of the road).
+    """
     pts = road_points(depth, road_mask, K, max_length, max_width, camera_height=camera_height)
     if len(pts) < min_points:
-        return None, f"{len(pts)} road points within {max_width} m x {max_length} m (< {min_points})"
+        return None, f"{len(pts)} road points within |X| < {max_width:g} m, Z < {max_length:g} m (< {min_points})"
     try:
         plane = fit_plane_lmeds(pts, n_iter=n_iter, seed=seed)
+        if max_tilt_deg is not None and plane_tilt_deg(plane.normal) > max_tilt_deg:
+            return None, (f"degenerate road plane: normal {plane_tilt_deg(plane.normal):.1f} deg from the camera's "
+                          f"vertical (> {max_tilt_deg:g})")
         return scale_from_camera_height(plane, camera_height), None
     except ValueError as err:
-        return None, f"road plane fit failed: {err}"
+        return None, f"degenerate road plane: {err}"
 
 
 def fixed_plane_scale(depth: np.ndarray, road_mask: np.ndarray, K: np.ndarray, camera_height: float, *,

@@ -99,12 +99,15 @@ def self_supervised_loss(target: torch.Tensor, warped: torch.Tensor | Sequence[S
     if n_scales != len(disps):
         raise ValueError(f"{n_scales} scales of warped images but {len(disps)} disparities")
 
-    reproj = photometric_error(warped_t.reshape(-1, c, h, w), target.repeat(n_scales * n_src, 1, 1, 1), alpha)
-    reproj = reproj.reshape(n_scales, n_src, b, h, w).transpose(1, 2).reshape(n_scales * b, n_src, h, w)
-    min_err = min_reprojection(reproj)  # (S*B, 1, H, W)
+    # One photometric-error call per (scale, source): the chunks stay in the CPU caches (one call on the whole
+    # (S*N*B, 3, H, W) stack is several times slower on CPU for the same arithmetic).
+    reproj = torch.stack([torch.cat([photometric_error(warped_t[s, k], target, alpha) for k in range(n_src)], 1)
+                          for s in range(n_scales)])  # (S, B, N, H, W)
+    min_err = min_reprojection(reproj.reshape(n_scales * b, n_src, h, w))  # (S*B, 1, H, W)
     if automasking:
-        ident = photometric_error(identity_t.reshape(-1, c, h, w), target.repeat(n_src, 1, 1, 1), alpha)
-        ident = ident.reshape(n_src, b, h, w).transpose(0, 1).repeat(n_scales, 1, 1, 1)  # (S*B, N, H, W)
+        with torch.no_grad():  # the sources are inputs: no gradient flows through the identity errors
+            ident = torch.cat([photometric_error(identity_t[k], target, alpha) for k in range(n_src)], 1)
+        ident = ident.repeat(n_scales, 1, 1, 1)  # (S*B, N, H, W)
         mask = automask(min_err, ident, noise_std, generator).to(min_err.dtype)
     else:
         mask = torch.ones_like(min_err)

@@ -76,7 +76,7 @@ def source_transforms(models: Mapping[str, nn.Module], batch: Mapping) -> dict[s
 def warp_all(batch: Mapping, disps: list[torch.Tensor], transforms: Mapping[str, torch.Tensor],
              min_depth: float = 0.1, max_depth: float = 100.0) -> torch.Tensor:
     """Every source warped into the target view at every scale, (S, N, B, 3, H, W) in ``batch["sources"]``
-    order; each disparity is upsampled to input resolution first (Monodepth2). One ``grid_sample`` call."""
+    order; each disparity is upsampled to input resolution first (Monodepth2). One ``grid_sample`` call per scale."""
     size = tuple(batch["target"].shape[-2:])
     names = list(batch["sources"])
     s_n, n_n, b = len(disps), len(names), batch["target"].shape[0]
@@ -87,12 +87,13 @@ def warp_all(batch: Mapping, disps: list[torch.Tensor], transforms: Mapping[str,
     T = torch.stack([transforms[n] for n in names])  # (N, B, 4, 4)
     K = batch["K"]
 
-    def flat(x: torch.Tensor) -> torch.Tensor:  # broadcast to (S, N, B, ...) and flatten
-        return x.expand(s_n, n_n, b, *x.shape[3:]).reshape(-1, *x.shape[3:])
+    def flat(x: torch.Tensor) -> torch.Tensor:  # broadcast to (N, B, ...) and flatten
+        return x.expand(n_n, b, *x.shape[2:]).reshape(-1, *x.shape[2:])
 
-    warped = warping.warp(flat(images.unsqueeze(0)), flat(depth.unsqueeze(1)), flat(K[None, None]),
-                          flat(T.unsqueeze(0)))
-    return warped.reshape(s_n, n_n, b, *warped.shape[1:])
+    # one grid_sample per scale (chunks that stay in the CPU caches; one call on everything is slower)
+    warped = torch.stack([warping.warp(flat(images), flat(depth[s].unsqueeze(0)), flat(K[None]), flat(T))
+                          for s in range(s_n)])
+    return warped.reshape(s_n, n_n, b, *warped.shape[2:])
 
 
 def loss_from_outputs(batch: Mapping, disps: list[torch.Tensor], transforms: Mapping[str, torch.Tensor], *,

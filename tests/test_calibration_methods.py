@@ -1,0 +1,198 @@
+"""McCraith ch. 5 scaling methods on synthetic scenes: known per-frame scales, skipped frames, tables."""
+import numpy as np
+import pytest
+
+from redsup.calib import inputs, methods, report
+from redsup.depth import calibration
+from redsup.prep import masks_io
+from redsup.tables import align, paper_table
+
+H_CAM = 1.65
+K = np.array([[100.0, 0.0, 63.5], [0.0, 100.0, 31.5], [0.0, 0.0, 1.0]])
+SIZE = (64, 128)  # prediction (H, W); the ground truth is twice as large
+SCALES = (20.0, 35.0, 27.0)  # metres per network unit, per frame
+
+
+def _unit(v):
+    v = np.asarray(v, dtype=float)
+    return v / np.linalg.norm(v)
+
+
+def _metric_depth(K_, size, normal, car=True):
+    """Camera-z depth of a road plane n.X + 1.65 = 0 below the horizon, a slanted facade 20-40 m away
+    elsewhere, and a car (a slanted face 8-12 m away) on the road."""
+    h, w = size
+    v, u = np.mgrid[0:h, 0:w].astype(float)
+    rays = np.stack([u, v, np.ones_like(u)], -1) @ np.linalg.inv(K_).T
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = -H_CAM / (rays @ normal)
+    facade = 20.0 + 20.0 * u / w
+    road = (t > 0) & (t < facade)
+    depth = np.where(road, t, facade)
+    if car:
+        r = h / 64
+        rows, cols = slice(int(36 * r), int(44 * r)), slice(int(20 * r), int(44 * r))
+        depth[rows, cols] = np.minimum(depth[rows, cols], 8.0 + 4.0 * (u[rows, cols] - 20 * r) / (24 * r))
+    return depth, road
+
+
+def _scene(normal=(0.0, -1.0, -0.035), empty_road_frame=None, seed=0):
+    rng = np.random.default_rng(seed)
+    normal = _unit(normal)  # about 2 degrees of pitch
+    K2 = K.copy()
+    K2[:2] *= 2
+    K2[:2, 2] += 0.5  # pixel-centre convention of a 2x resize
+    metric, road = _metric_depth(K, SIZE, normal)
+    gt_full, _ = _metric_depth(K2, (2 * SIZE[0], 2 * SIZE[1]), normal)
+    sparse = np.zeros(gt_full.shape, bool)
+    sparse[::3, ::2] = True
+    preds, gts, roads = [], [], []
+    for i, s in enumerate(SCALES):
+        noise = 1.0 + 0.01 * rng.standard_normal(SIZE)
+        preds.append(metric / s * noise)
+        gts.append(np.where(sparse, gt_full, 0.0))
+        mask = road.copy()  # the segmenter also marks the car as road (outliers for the fit)
+        mask[36:44, 20:44] = True
+        if i == empty_road_frame:
+            mask[:] = False
+        roads.append(mask)
+    return inputs.SceneInputs("test_000", np.stack(preds).astype(np.float32), K, np.stack(gts).astype(np.float32),
+                              np.stack(roads))
+
+
+def test_road_plane_recovers_the_per_frame_scale():
+    scene = _scene()
+    scales = methods.road_scales(scene, camera_height=H_CAM, length=30.0, width=3.0, min_points=20, n_iter=300,
+                                 max_tilt_deg=None, seed=0)
+    for (s, reason), truth in zip(scales, SCALES):
+        assert reason is None
+        assert s == pytest.approx(truth, rel=0.01)
+    # the per-frame GT ratio recovers it too (on the resized prediction, at the GT resolution)
+    for (s, reason), truth in zip(methods.gt_scales(scene), SCALES):
+        assert reason is None and s == pytest.approx(truth, rel=0.01)
+
+
+def test_evaluation_of_the_methods():
+    scene = _scene()
+    results = {}
+    single = methods.single_scale([scene])
+    assert single["scale"] == pytest.approx(np.median(SCALES), rel=0.01) and single["n_frames"] == 3
+    for name in ("gt_median", "single_test", "fixed_plane", "road_L30_W3"):
+        scales = {scene.name: methods.method_scales(scene, name, camera_height=H_CAM, single=single["scale"])}
+        if name == "gt_median":
+            assert scales[scene.name] is None
+            scales = None
+        results[name] = methods.evaluate_scenes([scene], name, scales)
+    summary = {k: r["summary"] for k, r in results.items()}
+    assert summary["road_L30_W3"]["abs_rel"] < 0.03
+    assert summary["road_L30_W3"]["scale_rel_err"] < 0.01
+    assert summary["gt_median"]["abs_rel"] < 0.03
+    # one scale for frames whose true scales differ by 1.75x is far worse
+    assert summary["single_test"]["abs_rel"] > 0.1
+    # a fixed horizontal plane misreads the pitched road
+    assert summary["fixed_plane"]["scale_rel_err"] > 0.05 > summary["road_L30_W3"]["scale_rel_err"]
+    for s in summary.values():
+        assert s["n_frames"] == 3 and s["n_skipped"] == 0
+
+
+def test_frame_without_road_is_skipped_with_a_reason():
+    scene = _scene(empty_road_frame=1)
+    for name in ("road_L30_W3", "fixed_plane"):
+        scales = {scene.name: methods.method_scales(scene, name, camera_height=H_CAM)}
+        assert scales[scene.name][1][0] is None
+        result = methods.evaluate_scenes([scene], name, scales)
+        s = result["summary"]
+        assert (s["n_frames"], s["n_skipped"]) == (2, 1)
+        assert all(np.isfinite(s[k]) for k in ("abs_rel", "rmse", "a1", "scale_rel_err"))
+        assert len(result["skipped"]) == 1 and result["skipped"][0].startswith("test_000 frame 1: ")
+        assert result["frames"][1]["scale"] is None and result["frames"][1]["reason"]
+    # a scene where every frame fails still gives counts, not NaN metrics
+    empty = _scene()
+    empty.road[:] = False
+    result = methods.evaluate_scenes([empty], "road_L30_W3",
+                                     {empty.name: methods.method_scales(empty, "road_L30_W3", camera_height=H_CAM)})
+    assert result["summary"] == {"n_frames": 0, "n_skipped": 3, "scale_rel_err": None}
+    row = report.metrics_row(result)
+    assert row["frames"] == 0 and row["skipped"] == 3
+
+
+def test_method_names():
+    assert methods.road_method(30.0, 3.0) == "road_L30_W3"
+    assert methods.road_method(30, 0.5) == "road_L30_W0.5"
+    assert methods.parse_method("road_L30_W0.5") == {"kind": "road", "length": 30.0, "width": 0.5}
+    assert methods.parse_method("single_train") == {"kind": "single", "split": "train"}
+    with pytest.raises(ValueError, match="unknown calibration method"):
+        methods.parse_method("road_L30")
+    with pytest.raises(ValueError, match="single scale"):
+        methods.method_scales(_scene(), "single_train", camera_height=H_CAM)
+
+
+def test_crop_resize_nearest_by_hand():
+    mask = np.arange(24).reshape(4, 6)
+    crop = {"top": 1, "bottom": 1, "left": 0, "right": 2}  # keeps rows 1-2, columns 0-3
+    # 4 x 2 -> 2 x 1: output pixel centres fall in input row 1 of the cut, columns 1 and 3
+    assert inputs.crop_resize_nearest(mask, crop, (2, 1)).tolist() == [[13, 15]]
+    # identity size: just the crop
+    assert inputs.crop_resize_nearest(mask, crop, (4, 2)).tolist() == [[6, 7, 8, 9], [12, 13, 14, 15]]
+    # upsampling repeats pixels; a stack of masks is resized frame by frame
+    up = inputs.crop_resize_nearest(np.stack([mask, mask + 100]), crop, (8, 4))
+    assert up.shape == (2, 4, 8) and up[1, 3, 7] == 115 and up[0, 0, 0] == 6
+    with pytest.raises(ValueError, match="leaves nothing"):
+        inputs.crop_resize_nearest(mask, {"top": 2, "bottom": 2, "left": 0, "right": 0}, (2, 2))
+
+
+def test_resize_depth_interpolates_disparity():
+    pred = np.array([[1.0, 2.0]], dtype=np.float32)
+    up = inputs.resize_depth(pred, (1, 4))
+    # bilinear in disparity with pixel centres: disparities 1, 0.875, 0.625, 0.5
+    assert up[0] == pytest.approx(1.0 / np.array([1.0, 0.875, 0.625, 0.5]))
+    assert inputs.resize_depth(pred, (1, 2)) == pytest.approx(pred)
+    bad = inputs.resize_depth(np.array([[1.0, 2.0, 0.0]], dtype=np.float32), (1, 6))
+    assert np.isfinite(bad[0, 0]) and not np.isfinite(bad[0, 5])  # an invalid depth is not interpolated
+
+
+def test_load_scene_brings_road_masks_to_the_prediction(tmp_path):
+    crop = {"top": 2, "bottom": 2, "left": 0, "right": 0}
+    raw = np.zeros((2, 8, 8), bool)  # raw masks 8 x 8 -> cut 8 x 4 -> prediction 4 x 2
+    raw[:, 4:6, :4] = True
+    np.savez(tmp_path / "pred.npz", depth=np.ones((2, 2, 4), np.float32), K=np.eye(3))
+    np.savez(tmp_path / "gt.npz", depth=np.ones((2, 4, 8), np.float32))
+    np.savez(tmp_path / "road.npz", road=masks_io.pack_masks(list(raw), (8, 8)), image_size=np.array([8, 8]))
+    scene = inputs.load_scene(tmp_path / "pred.npz", tmp_path / "gt.npz", tmp_path / "road.npz", crop=crop)
+    assert scene.name == "pred" and scene.n_frames == 2
+    assert scene.road.shape == (2, 2, 4)
+    assert scene.road[0].tolist() == [[False] * 4, [True, True, False, False]]
+    np.savez(tmp_path / "gt3.npz", depth=np.ones((3, 4, 8), np.float32))
+    with pytest.raises(ValueError, match="3 ground-truth frames"):
+        inputs.load_scene(tmp_path / "pred.npz", tmp_path / "gt3.npz")
+    np.savez(tmp_path / "gt_big.npz", depth=np.ones((2, 6, 8), np.float32))
+    with pytest.raises(ValueError, match="cropped by"):
+        inputs.load_scene(tmp_path / "pred.npz", tmp_path / "gt_big.npz", tmp_path / "road.npz", crop=crop)
+
+
+def _fake_result(abs_rel, skipped=0):
+    summary = {k: abs_rel for k in ("abs_rel", "sq_rel", "rmse", "rmse_log")}
+    summary.update(a1=0.9, a2=0.95, a3=0.99, n_frames=10 - skipped, n_skipped=skipped, scale_rel_err=0.05)
+    return {"summary": summary, "skipped": [f"test_000 frame {i}: why" for i in range(skipped)]}
+
+
+def test_tables_use_the_paper_row_and_column_names():
+    results = {m: _fake_result(0.1 + 0.01 * i) for i, m in enumerate(
+        ["single_train", "single_test", "fixed_plane", "road_L30_W3", "gt_median"])}
+    t1 = report.table1(results, 30.0, 3.0)
+    aligned = align(t1, paper_table("mccraith_ch5_table1"))
+    assert set(paper_table("mccraith_ch5_table1").index) <= set(aligned.index)
+    assert set(paper_table("mccraith_ch5_table1").columns) <= set(aligned.columns)
+    assert t1.loc["(d) Ours", "Abs Rel"] == pytest.approx(0.13)
+    t2 = align(report.table2(results, 30.0, 3.0), paper_table("mccraith_ch5_table2"))
+    assert {"Ours", "Godard et al. [2019]"} <= set(t2.index)
+    sweep = {methods.road_method(v, 3.0): _fake_result(0.2) for v in (6, 10, 30)}
+    t3 = report.sweep_table(sweep, [6, 10, 30], vary="length", length=30.0, width=3.0)
+    assert list(t3.index) == ["6", "10", "30"]
+    assert set(align(t3, paper_table("mccraith_ch5_table3")).index) >= {"6", "10", "30"}
+    results["fixed_plane"] = _fake_result(0.2, skipped=4)
+    note = report.skipped_note(results, {"fixed_plane": "(c)", "gt_median": "GT"}, limit=2)
+    assert note.startswith("Skipped frames: (c): 4 frame(s) skipped") and "+2 more" in note
+    fig = report.fig1_table([20.0, 40.0, None], [21.0, 38.0, 30.0], 30.0)
+    assert fig.loc[report.FIG1_GT_ROW, "max/min"] == pytest.approx(2.0)
+    assert fig.loc[report.FIG1_OURS_ROW, "median |ours / GT - 1|"] == pytest.approx(0.05)

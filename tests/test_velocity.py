@@ -1,0 +1,280 @@
+"""McCraith ch. 3 library: eq. (1), the geometric baseline, smoothing, the MLP, the synthetic generator,
+the TuSimple metric and bad-input handling. (MedianFlow on a rendered clip: tests/test_tracks.py.)"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from redsup.sceneio import SceneError
+from redsup.velocity import geometry, mlp
+from redsup.velocity.data import TrackSet, load_tracks
+from redsup.velocity.experiment import evaluate, run_geometric, training_tracks
+from redsup.velocity.metrics import tusimple_metrics
+from redsup.velocity.smoothing import gaussian_smooth
+from redsup.velocity.summary import constraint_px, fig3_table, size_jitter
+from redsup.velocity.synthetic import box_size, fit_statistics, generate_tracks
+
+CAL = geometry.Calibration(fx=714.0, fy=710.0, cx=640.0, cy=360.0, height=1.8)
+FPS = 20.0
+
+
+# ------------------------------------------------------------------------------------------ eq. (1)
+def test_eq1_round_trip_hand_values():
+    # ground point 2.5 m right, 30 m ahead: u = 640 + 714 * 2.5 / 30 = 699.5, v = 360 + 710 * 1.8 / 30 = 402.6
+    box = geometry.box_from_ground(2.5, 30.0, 40.0, 30.0, CAL)
+    np.testing.assert_allclose(box, [699.5 - 20.0, 402.6 - 30.0, 40.0, 30.0])
+    u, v = geometry.bottom_centre(box)
+    assert u == pytest.approx(699.5) and v == pytest.approx(402.6)
+    X, Z, valid = geometry.box_ground_point(box, CAL)
+    assert valid and X == pytest.approx(2.5) and Z == pytest.approx(30.0)
+
+
+def test_eq1_round_trip_many_points_and_horizon():
+    rng = np.random.default_rng(0)
+    X, Z = rng.uniform(-12, 12, 500), rng.uniform(3, 120, 500)
+    boxes = geometry.box_from_ground(X, Z, rng.uniform(2, 80, 500), rng.uniform(2, 60, 500), CAL)
+    X2, Z2, valid = geometry.box_ground_point(boxes, CAL)
+    assert valid.all()
+    np.testing.assert_allclose(X2, X, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(Z2, Z, rtol=1e-9)
+    # a box bottom on or above the horizon has no ground point
+    X3, Z3, valid3 = geometry.ground_point(np.array([640.0, 700.0]), np.array([360.0, 300.0]), CAL)
+    assert not valid3.any() and np.isnan(Z3).all() and np.isnan(X3).all()
+
+
+def test_geometric_velocity_recovers_constant_motion():
+    t = np.arange(40) / FPS
+    X, Z = 2.0 + 0.5 * t, 30.0 - 2.0 * t  # vx = 0.5, vz = -2 m/s
+    boxes = geometry.box_from_ground(X, Z, 50.0, 40.0, CAL)[None]
+    out = geometry.geometric_velocity(boxes, CAL, FPS, window=10)
+    np.testing.assert_allclose(out["velocity"][0], [0.5, -2.0], atol=1e-9)
+    np.testing.assert_allclose(out["position"][0], [X[-1], Z[-1]])
+    assert out["valid"][0]
+    # window 2 is the backward difference
+    noisy = boxes.copy()
+    noisy[0, -1, 1] += 1.0  # box bottom one pixel lower in the last frame
+    X_n, Z_n, _ = geometry.box_ground_point(noisy[0], CAL)
+    out2 = geometry.geometric_velocity(noisy, CAL, FPS, window=2)
+    np.testing.assert_allclose(out2["velocity"][0], [(X_n[-1] - X_n[-2]) * FPS, (Z_n[-1] - Z_n[-2]) * FPS])
+
+
+def test_line_slope_skips_invalid_frames_and_flags_too_few():
+    values = np.array([[0.0, 99.0, 2.0, 3.0], [1.0, 2.0, 3.0, 4.0]])
+    valid = np.array([[True, False, True, True], [False, False, False, True]])
+    slope, ok = geometry.line_slope_at_end(values, valid, window=4)
+    assert slope[0] == pytest.approx(1.0) and ok[0]
+    assert slope[1] == 0.0 and not ok[1]
+    boxes = np.tile([[600.0, 300.0, 20.0, 20.0]], (1, 5, 1))  # bottom at v = 320 < cy: above the horizon
+    out = geometry.geometric_velocity(boxes, CAL, FPS, window=3)
+    assert not out["valid"][0] and (out["velocity"][0] == 0).all()
+
+
+def test_read_calibration_ours_and_tusimple(tmp_path):
+    (tmp_path / "a").mkdir()
+    (tmp_path / "a" / "calibration.txt").write_text("178.6 178.6 159.5 89.5\n1.8\n")
+    cal = geometry.read_calibration(tmp_path / "a")
+    assert (cal.fx, cal.fy, cal.cx, cal.cy, cal.height) == (178.6, 178.6, 159.5, 89.5, 1.8)
+    (tmp_path / "b").mkdir()
+    (tmp_path / "b" / "calibration.txt").write_text(
+        "Intrinsic matrix:\n714.1526    0.      675.5754\n   0.      710.3725  376.2563\n   0.        0.        1.    \n"
+        "\nCamera Height:\n\n1.80m\n")
+    cal = geometry.read_calibration(tmp_path / "b")
+    assert (cal.fx, cal.fy, cal.cx, cal.cy, cal.height) == (714.1526, 710.3725, 675.5754, 376.2563, 1.8)
+    (tmp_path / "c").mkdir()
+    (tmp_path / "c" / "calibration.txt").write_text("714 710 640\n")
+    with pytest.raises(SceneError, match="calibration.txt"):
+        geometry.read_calibration(tmp_path / "c")
+    with pytest.raises(SceneError, match="missing"):
+        geometry.read_calibration(tmp_path / "nowhere")
+
+
+# ------------------------------------------------------------------------------------- smoothing
+def test_gaussian_smoothing_keeps_constants_and_interior_lines():
+    t = np.arange(40, dtype=float)
+    boxes = np.stack([t * 1.5, np.full(40, 7.0), t * 0.0 + 3.0, 100 - t], axis=-1)[None]
+    out = gaussian_smooth(boxes, 5.0)
+    np.testing.assert_allclose(out[0, :, 1], 7.0)
+    np.testing.assert_allclose(out[0, 20, 0], 30.0, atol=1e-3)  # a line is kept where the kernel fits
+    np.testing.assert_allclose(gaussian_smooth(boxes, 0.0), boxes)
+    assert abs(out[0, -1, 0] - boxes[0, -1, 0]) > 1  # the end is pulled in (nearest-value boundary)
+
+
+# -------------------------------------------------------------------------------------------- MLP
+def test_crelu_and_architecture():
+    x = torch.tensor([[1.5, -2.0, 0.0]])
+    np.testing.assert_allclose(mlp.CReLU()(x).numpy(), [[1.5, 0.0, 0.0, 0.0, 2.0, 0.0]])
+    model = mlp.VelocityMLP(160, hidden=70, layers=4, dropout=0.2)
+    linears = [m for m in model.net if isinstance(m, torch.nn.Linear)]
+    assert [(m.in_features, m.out_features) for m in linears] == [(160, 70), (140, 70), (140, 70), (140, 70),
+                                                                 (140, 2)]
+    assert sum(isinstance(m, mlp.CReLU) for m in model.net) == 4
+    assert all(m.p == 0.2 for m in model.net if isinstance(m, torch.nn.Dropout))
+    assert model(torch.zeros(3, 160)).shape == (3, 2)
+
+
+def test_box_features_are_standardised_image_coordinates():
+    boxes = np.array([[[640.0 + 71.4, 360.0 - 71.0, 714.0, 355.0]]])
+    f = mlp.box_features(boxes, CAL, 0.0)
+    np.testing.assert_allclose(f, [[0.1, -0.1, 1.0, 0.5]], rtol=1e-6)
+    assert mlp.box_features(np.zeros((0, 40, 4)), CAL, 5.0).shape == (0, 160)
+
+
+def test_velocity_loss_is_unreduced_squared_norm():
+    loss = mlp.velocity_loss(torch.tensor([[1.0, 2.0], [0.0, 0.0]]), torch.tensor([[0.0, 0.0], [3.0, 4.0]]))
+    np.testing.assert_allclose(loss.numpy(), [5.0, 25.0])
+
+
+def test_training_reduces_the_loss_and_lr_decays():
+    rng = np.random.default_rng(1)
+    feats = rng.normal(0, 1, (512, 8)).astype(np.float32) * 5 + 3  # standardised inside the model
+    targets = (feats - 3) / 5 @ rng.normal(0, 1, (8, 2))
+    model, curve = mlp.train_mlp(feats, targets, hidden=16, layers=2, dropout=0.0, lr=3e-3, lr_decay=0.9,
+                                 epochs=15, batch_size=32, seed=0, eval_sets={"val": (feats[:50], targets[:50])})
+    assert len(curve) == 15 and curve[-1]["train_loss"] < 0.1 * curve[0]["train_loss"]
+    assert curve[1]["lr"] == pytest.approx(3e-3 * 0.9) and curve[-1]["val_loss"] < 0.1 * curve[0]["val_loss"]
+    assert mlp.predict(model, feats[:4]).shape == (4, 2)
+    boxes = generate_tracks(_stats(), 2, rng)["boxes"]
+    model = mlp.VelocityMLP(160)
+    timing = mlp.forward_time_ms(model, boxes, CAL, 5.0, repeats=5)
+    assert 0 < timing["forward_ms_median"] < 1000
+
+
+# ---------------------------------------------------------------------------------------- metric
+def test_tusimple_metric_on_hand_made_predictions():
+    true = np.array([[0.0, 1.0], [1.0, 0.0], [0.0, 0.0], [2.0, 2.0], [0.0, 0.0]])
+    pred = np.array([[0.0, 2.0], [1.0, 2.0], [3.0, 4.0], [2.0, 2.0], [1.0, 1.0]])
+    bins = np.array([0, 0, 1, 2, 2])
+    m = tusimple_metrics(pred, true, bins)
+    # near: (1 + 4) / 2 = 2.5; medium: 9 + 16 = 25; far: (0 + 2) / 2 = 1; E_v = (2.5 + 25 + 1) / 3 = 9.5
+    assert m["E_v_near"] == 2.5 and m["E_v_medium"] == 25.0 and m["E_v_far"] == 1.0
+    assert m["E_v"] == pytest.approx(9.5) and (m["n_near"], m["n_medium"], m["n_far"]) == (2, 1, 2)
+    p = tusimple_metrics(pred, true, bins, p_pred=pred, p_true=true)
+    assert p["E_p"] == pytest.approx(9.5)
+    # an empty bin has no error and E_v averages the others
+    m2 = tusimple_metrics(pred[:2], true[:2], np.array([0, 2]))
+    assert math.isnan(m2["E_v_medium"]) and m2["E_v"] == pytest.approx((1 + 4) / 2) and m2["n_bins"] == 2
+
+
+# ------------------------------------------------------------------------------- synthetic data
+def _fake_training(n=400, seed=0) -> TrackSet:
+    """Training vehicles with known statistics: 1.8 x 1.5 m boxes, constant velocities ~ N(mean, cov)."""
+    rng = np.random.default_rng(seed)
+    T = 40
+    t = np.arange(T) / FPS
+    X0, Z0 = rng.choice([-3.75, 0.0, 3.75], n) + rng.normal(0, 0.2, n), rng.uniform(8, 80, n)
+    V = rng.multivariate_normal([0.1, -0.5], [[0.04, 0.01], [0.01, 2.25]], n)
+    X, Z = X0[:, None] + V[:, :1] * t, Z0[:, None] + V[:, 1:] * t
+    boxes = geometry.box_from_ground(X, Z, CAL.fx * 1.8 / Z, CAL.fy * 1.5 / Z, CAL)
+    return TrackSet(boxes=boxes, velocity=V, position=np.stack([X[:, -1], Z[:, -1]], -1),
+                    bins=np.digitize(Z[:, -1], (20, 45)), clip=np.arange(n), track_id=np.zeros(n, int),
+                    tracker_failed=np.zeros(n, bool), degenerate=np.zeros(n, bool), calib=CAL)
+
+
+def _stats(train=None):
+    train = train if train is not None else _fake_training()
+    return fit_statistics(train, CAL, n_frames=40, fps=FPS, size_degree=2, max_depth=150.0, min_depth=2.0)
+
+
+def test_generator_fit_recovers_the_statistics():
+    train = _fake_training()
+    stats = _stats(train)
+    np.testing.assert_allclose(np.polyval(stats["width_poly_inv_z"], 1 / np.array([10.0, 40.0])),
+                               [1.8 / 10, 1.8 / 40], rtol=1e-6)
+    assert stats["width_rel_std"] < 1e-6 and stats["n_start_points"] == 400
+    np.testing.assert_allclose(stats["velocity_mean"], train.velocity.mean(0))
+    np.testing.assert_allclose(stats["velocity_cov"], np.cov(train.velocity.T))
+    X1, Z1, _ = geometry.box_ground_point(train.boxes[:, 0], CAL)  # eq. (1) of the first boxes
+    np.testing.assert_allclose(stats["start_points"], np.stack([X1, Z1], -1))
+
+
+def test_generated_tracks_obey_the_fitted_statistics():
+    stats = _stats()
+    gen = generate_tracks(stats, 6000, np.random.default_rng(3))
+    boxes, V = gen["boxes"], gen["velocity"]
+    assert boxes.shape == (6000, 40, 4) and np.isfinite(boxes).all()
+    # start points are drawn from the empirical set
+    X1, Z1, valid = geometry.box_ground_point(boxes[:, 0], CAL)
+    points = np.asarray(stats["start_points"])
+    assert valid.all()
+    np.testing.assert_allclose(np.stack([X1, Z1], -1), points[gen["start_index"]], atol=1e-6)
+    # velocities follow the fitted Gaussian
+    np.testing.assert_allclose(V.mean(0), stats["velocity_mean"], atol=0.06)
+    np.testing.assert_allclose(np.cov(V.T), stats["velocity_cov"], rtol=0.1, atol=0.005)
+    # motion is the integrated constant velocity: eq. (1) of every box lies on P_1 + V t
+    X, Z, _ = geometry.box_ground_point(boxes, CAL)
+    t = np.arange(40) / FPS
+    np.testing.assert_allclose(X, X1[:, None] + V[:, :1] * t, atol=1e-6)
+    np.testing.assert_allclose(Z, Z1[:, None] + V[:, 1:] * t, atol=1e-6)
+    assert Z.min() >= stats["min_depth"]
+    # sizes follow the fitted polynomial in 1/Z (this training set has no size spread)
+    w_fit, h_fit = box_size(stats, Z)
+    np.testing.assert_allclose(boxes[..., 2], w_fit, rtol=1e-4)
+    np.testing.assert_allclose(boxes[..., 3], h_fit, rtol=1e-4)
+    # the geometric baseline is exact on synthetic tracks (they are generated with eq. (1))
+    out = geometry.geometric_velocity(boxes[:50], CAL, FPS, window=10)
+    np.testing.assert_allclose(out["velocity"], V[:50], atol=1e-6)
+
+
+def test_velocity_scale_widens_the_velocities():
+    stats = _stats()
+    base = generate_tracks(stats, 4000, np.random.default_rng(4))["velocity"]
+    wide = generate_tracks(stats, 4000, np.random.default_rng(4), velocity_scale=3.0)["velocity"]
+    assert wide[:, 1].std() == pytest.approx(3 * base[:, 1].std(), rel=0.1)
+
+
+# ----------------------------------------------------------------------------------- bad input
+def _write_tracks(path, boxes, failed, z):
+    n = len(boxes)
+    np.savez(path, clip=np.arange(n) + 1, track_id=np.zeros(n, int), boxes=np.asarray(boxes, np.float32),
+             failed=failed, velocity=np.tile([1.0, -0.5], (n, 1)), position=np.stack([z, np.ones(n)], -1),
+             distance=z, bin_index=np.digitize(z, (20, 45)).astype(np.int8))
+
+
+def test_failed_tracks_and_degenerate_boxes_are_flagged_excluded_and_scored(tmp_path):
+    good = _fake_training(3).boxes
+    boxes = good.copy()
+    boxes[1, -1, 2] = 0.0  # degenerate annotation: zero width
+    boxes[2, 5] = np.nan   # a broken box
+    failed = np.zeros((3, 40), bool)
+    failed[0, :10] = True  # the tracker lost the first vehicle early in the clip
+    _write_tracks(tmp_path / "m.npz", boxes, failed, np.array([12.0, 30.0, 60.0]))
+    tracks = load_tracks(tmp_path / "m.npz", min_box_px=1.0)
+    tracks.calib = CAL
+    assert tracks.tracker_failed.tolist() == [True, False, False]
+    assert tracks.degenerate.tolist() == [False, True, True] and np.isfinite(tracks.boxes).all()
+    assert tracks.velocity[0].tolist() == [-0.5, 1.0]  # converted from TuSimple's [vz, vx]
+    q = tracks.quality()
+    assert (q["n_tracker_failed"], q["n_degenerate"], q["n_usable"], q["n_clips_with_bad_input"]) == (1, 2, 0, 3)
+    assert tracks.bad_input_per_clip()[2] == {"tracker_failed": 0, "degenerate": 1}
+    # excluded from training ...
+    _, _, counts = training_tracks({"name": "t", "train_on": "tracker"}, tracks, None, 0, np.random.default_rng(0))
+    assert counts["train_n"] == 0 and counts["train_excluded"] == 3
+    with pytest.raises(ValueError, match="usable"):
+        fit_statistics(tracks, CAL, n_frames=40, fps=FPS)
+    # ... scored at evaluation, never a crash
+    metrics, _ = run_geometric({"test": tracks}, FPS, window=10, timing_repeats=3)
+    assert metrics["test_n"] == 3 and np.isfinite(metrics["test_E_v"])
+    assert metrics["test_n_tracker_failed"] == 1 and metrics["test_n_degenerate"] == 2
+    m = evaluate("x", tracks, np.zeros((3, 2)))
+    assert m["x_n"] == 3 and "x_E_v_clean" not in m
+
+
+def test_fig3_fractions_inside_the_constraint_lines():
+    Z = np.array([10.0, 20.0, 40.0])
+    values = {"Z": Z, "x": constraint_px("x", 0.0, Z, CAL), "y": constraint_px("y", 1.5, Z, CAL),
+              "h": CAL.fy * np.array([1.5, 1.0, 2.0]) / Z, "w": CAL.fx * np.array([1.8, 1.8, 3.5]) / Z}
+    table = fig3_table(values, CAL)
+    assert table.at["h (box height)", "fraction inside"] == pytest.approx(2 / 3)
+    assert table.at["w (box width)", "fraction inside"] == pytest.approx(2 / 3)
+    assert table.at["x (lateral offset X)", "fraction inside"] == 1.0
+    assert table.at["y (box top)", "median (m)"] == pytest.approx(1.5)
+    assert table.at["w (box width)", "median (m)"] == pytest.approx(1.8)
+
+
+def test_size_jitter_hand_case():
+    boxes = np.zeros((1, 4, 4))
+    boxes[0, :, 2] = [10, 12, 10, 12]  # second differences |10 - 24 + 10| = 4, |12 - 20 + 12| = 4
+    assert size_jitter(boxes) == pytest.approx(2.0)  # averaged with h (all zero)

@@ -1,0 +1,180 @@
+"""Training loop of the detector (weak: 2D masks -> SIC / L2 + voting; or the supervised reference).
+
+One step: B frames drawn without replacement per epoch (seeded), each with its own global augmentation
+(applied to points, L_m and gt boxes), a forward pass, targets (weak: median cell + voting on the current
+predictions; supervised: gt centres), the losses of `criterion` averaged over objects (the heatmap loss
+normalised by the number of objects, CenterNet), AdamW with a one-cycle learning rate and gradient-norm
+clipping. A step whose loss is not finite is skipped (counted and reported), never applied.
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import torch
+
+from redsup.det3d.template import Template
+from redsup.lidar_detector.augment import IDENTITY, AugmentSpec, sample_transform
+from redsup.lidar_detector.criterion import alignment_loss, focal_heatmap_loss, supervised_terms, weak_alignment
+from redsup.lidar_detector.data import SplitData
+from redsup.lidar_detector.grid import GridSpec
+from redsup.lidar_detector.model import CenterDetector
+from redsup.lidar_detector.targets import (assign_supervised, assign_weak, heatmap_target, object_radius,
+                                           weak_objects)
+
+
+@dataclass(frozen=True)
+class RunSpec:
+    """One configuration of the chapter's tables."""
+    supervision: str = "masks"      # masks: 2D detections (ours) | gt: ground-truth boxes (CenterPoint rows)
+    loss: str = "sic"               # sic | l2 (masks only)
+    alpha: float = 5.0
+    beta: float = 0.0
+    window: int = 2                 # voting window w: (2w + 1)^2 cells (masks only)
+    size: str = "template"          # template: fixed average size (the † rows) | predicted (size head)
+
+    def __post_init__(self):
+        if self.supervision not in ("masks", "gt"):
+            raise ValueError(f"supervision must be 'masks' or 'gt', got {self.supervision!r}")
+        if self.size not in ("template", "predicted"):
+            raise ValueError(f"size must be 'template' or 'predicted', got {self.size!r}")
+        if self.window < 0:
+            raise ValueError(f"window must be >= 0, got {self.window}")
+        alignment_loss(self.loss, self.alpha, self.beta)
+
+    @classmethod
+    def from_config(cls, cfg: dict) -> "RunSpec":
+        return cls(supervision=cfg["supervision"], loss=cfg.get("loss", "sic"), alpha=float(cfg.get("alpha", 5.0)),
+                   beta=float(cfg.get("beta", 0.0)), window=int(cfg.get("window", 0)), size=cfg.get("size", "template"))
+
+
+@dataclass(frozen=True)
+class TrainSpec:
+    steps: int = 600
+    batch: int = 2
+    lr: float = 3e-3
+    weight_decay: float = 0.01
+    grad_clip: float = 10.0
+    weights: dict = field(default_factory=lambda: {"heatmap": 1.0, "alignment": 1.0, "yaw": 1.0, "offset": 1.0,
+                                                   "size": 1.0})
+    min_points: int = 3
+    max_points: int = 256
+    vote_yaw: str = "predicted"
+    min_radius: int = 2
+    log_every: int = 10
+    augment: bool = True
+
+    @classmethod
+    def from_config(cls, cfg: dict) -> "TrainSpec":
+        return cls(steps=int(cfg["steps"]), batch=int(cfg["batch"]), lr=float(cfg["lr"]),
+                   weight_decay=float(cfg["weight_decay"]), grad_clip=float(cfg["grad_clip"]),
+                   weights=dict(cfg["loss_weights"]), min_points=int(cfg["min_points"]),
+                   max_points=int(cfg["max_points"]), vote_yaw=cfg["vote_yaw"], min_radius=int(cfg["min_radius"]),
+                   log_every=int(cfg["log_every"]), augment=bool(cfg.get("augment", True)))
+
+
+def build_model(grid: GridSpec, run: RunSpec, n_bins: int, net: dict | None = None) -> CenterDetector:
+    net = net or {}
+    return CenterDetector(grid, n_bins=n_bins, predict_size=run.size == "predicted",
+                          pillar_channels=int(net.get("pillar_channels", 16)), channels=int(net.get("channels", 32)),
+                          deep_channels=int(net.get("deep_channels", 64)))
+
+
+def _batches(n_frames: int, batch: int, rng: np.random.Generator):
+    """Endless frame-index batches, a fresh permutation every epoch."""
+    while True:
+        perm = rng.permutation(n_frames)
+        for s in range(0, n_frames - batch + 1 if n_frames >= batch else 1, batch):
+            yield perm[s:s + batch]
+
+
+def train(data: SplitData, run: RunSpec, grid: GridSpec, spec: TrainSpec, aug: AugmentSpec, template: Template,
+          n_bins: int = 64, net: dict | None = None, seed: int = 0, device: str = "cpu",
+          log: Callable[[dict, int], None] | None = None) -> tuple[CenterDetector, dict]:
+    """Train one configuration; `log(metrics, step)` receives the running means every `log_every` steps.
+    Returns (model in eval mode, summary dict of counts and timings)."""
+    if data.n_frames == 0:
+        raise ValueError("no training frames")
+    torch.manual_seed(seed)
+    rng = np.random.default_rng(seed)
+    model = build_model(grid, run, n_bins, net).to(device)
+    model.train()
+    opt = torch.optim.AdamW(model.parameters(), lr=spec.lr, weight_decay=spec.weight_decay)
+    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=spec.lr, total_steps=max(spec.steps, 1), pct_start=0.3,
+                                                div_factor=10.0, final_div_factor=100.0)
+    bev = grid.bev()
+    tmpl = template.to(device=device)
+    loss_fn = alignment_loss(run.loss, run.alpha, run.beta)
+    weak = run.supervision == "masks"
+    radius_weak = object_radius(float(template.size[0]), float(template.size[1]), grid.cell, spec.min_radius)
+    w = {"heatmap": 1.0, "alignment": 1.0, "yaw": 1.0, "offset": 1.0, "size": 1.0, **spec.weights}
+    counts = {"objects_used": 0, "objects_outside_grid": 0, "objects_few_points": 0, "steps_nonfinite": 0,
+              "frames_seen": 0}
+    running: dict[str, list[float]] = {}
+    batches = _batches(data.n_frames, min(spec.batch, data.n_frames), rng)
+    t0 = time.perf_counter()
+    for step in range(spec.steps):
+        idx = next(batches)
+        tfs = [sample_transform(rng, aug) if spec.augment else IDENTITY for _ in idx]
+        pts = [torch.from_numpy(tf.points(data.points(int(f)))).to(device) for tf, f in zip(tfs, idx)]
+        out = model(pts)
+        B, _, H, W = out["heatmap"].shape
+        terms: dict[str, torch.Tensor] = {}
+        if weak:
+            sets = [[tf.points(s) for s in data.objects(int(f))] for tf, f in zip(tfs, idx)]
+            objs = weak_objects(sets, spec.min_points, spec.max_points, rng)
+            counts["objects_few_points"] += objs.n_skipped
+            assign = assign_weak(bev, out, objs, run.window, loss_fn, tmpl, spec.vote_yaw)
+            counts["objects_outside_grid"] += int((~assign.valid).sum())
+            counts["objects_used"] += int(assign.valid.sum())
+            heat_t = heatmap_target(B, H, W, objs.frame, assign.cell, torch.full((len(objs),), float(radius_weak)),
+                                    device=device)
+            al = weak_alignment(out, bev, assign, objs, loss_fn, tmpl)
+            if len(al["alignment"]):
+                terms["alignment"] = al["alignment"].mean()
+                terms["yaw"] = al["yaw_ce"].mean()
+                terms["vote_loss"] = assign.vote.loss[assign.valid].mean().detach()
+        else:
+            boxes = [tf.boxes(data.supervised_boxes(int(f), spec.min_points)) for tf, f in zip(tfs, idx)]
+            tg = assign_supervised(bev, boxes, n_bins, template.size, spec.min_radius)
+            counts["objects_used"] += len(tg.frame)
+            heat_t = heatmap_target(B, H, W, tg.frame, tg.cell, tg.radius, device=device)
+            if len(tg.frame):
+                sup = supervised_terms(out, tg)
+                terms["offset"] = sup["offset_l1"].mean()
+                terms["yaw"] = sup["yaw_ce"].mean()
+                if "size_l1" in sup:
+                    terms["size"] = sup["size_l1"].mean()
+        hm_map, n_pos = focal_heatmap_loss(out["heatmap"], heat_t)
+        terms["heatmap"] = hm_map.sum() / n_pos.clamp_min(1.0)
+        loss = sum(w[k] * v for k, v in terms.items() if k != "vote_loss")
+        counts["frames_seen"] += len(idx)
+        if not torch.isfinite(loss):
+            counts["steps_nonfinite"] += 1
+            print(f"step {step}: non-finite loss {float(loss)} ({ {k: float(v) for k, v in terms.items()} }); "
+                  "step skipped")
+            opt.zero_grad(set_to_none=True)
+            sched.step()
+            continue
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        if spec.grad_clip > 0:
+            torch.nn.utils.clip_grad_norm_(model.parameters(), spec.grad_clip)
+        opt.step()
+        sched.step()
+        for k, v in {"loss": loss, **terms}.items():
+            running.setdefault(k, []).append(float(v))
+        if log is not None and ((step + 1) % spec.log_every == 0 or step + 1 == spec.steps):
+            log({f"train/{k}": float(np.mean(v)) for k, v in running.items()} | {"train/lr": sched.get_last_lr()[0]},
+                step + 1)
+            running = {}
+    elapsed = time.perf_counter() - t0
+    model.eval()
+    summary = {**{f"train_{k}": float(v) for k, v in counts.items()}, "train_seconds": elapsed,
+               "train_steps": float(spec.steps), "train_seconds_per_step": elapsed / max(spec.steps, 1)}
+    if counts["steps_nonfinite"]:
+        print(f"{counts['steps_nonfinite']} of {spec.steps} steps had a non-finite loss and were skipped")
+    return model, summary
+

@@ -1,0 +1,11 @@
+"""Vehicle velocity from tracked 2D boxes and from synthetic box tracks (McCraith ch. 3).
+
+- `geometry`: eq. (1) (ground point of a box from the camera height, and back), the geometric baseline
+  (velocity = slope of a line through the last reprojected points), `calibration.txt` reader;
+- `data`: MedianFlow tracks of a clip split with ground truth and per-vehicle bad-input flags;
+- `smoothing`: the temporal Gaussian filter g;
+- `mlp`: the MLP with hand-written CReLU, features, training (Adam, exponential decay), timing;
+- `synthetic`: the §IV-B generator fitted on the training clips;
+- `metrics`: the TuSimple protocol (E_v per distance bin and overall, E_p);
+- `experiment`: one configuration end to end; `summary`: our tables and Fig. 3 / Fig. 6.
+"""

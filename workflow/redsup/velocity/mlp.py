@@ -1,0 +1,159 @@
+"""The learned velocity estimator of McCraith ch. 3 §III-B and §V: an MLP on the flattened box track.
+
+Psi(b) = MLP(vec(g(b))): g is the temporal Gaussian filter (`redsup.velocity.smoothing`), the boxes are
+expressed in standardised image coordinates (footnote 2 of the chapter: (x - cx) / fx, (y - cy) / fy,
+w / fx, h / fy, so the model does not depend on the image resolution), flattened frame by frame to a 4T
+vector and standardised with the mean / std of the training inputs (kept in the model). The MLP has
+`layers` hidden layers of `hidden` units, each Linear -> CReLU (written here: [relu(x), relu(-x)], doubling
+the width) -> Dropout, and a linear output (vx, vz). Loss: ||V - Psi(b)||^2 per track (MSE on (vx, vz)),
+Adam with exponential learning-rate decay per epoch.
+"""
+from __future__ import annotations
+
+import statistics
+import time
+from collections.abc import Callable
+
+import numpy as np
+import torch
+from torch import nn
+
+from redsup.velocity.geometry import Calibration
+from redsup.velocity.smoothing import gaussian_smooth
+
+
+class CReLU(nn.Module):
+    """Concatenated ReLU (Shang et al. 2016): [relu(x), relu(-x)] along the last axis."""
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return torch.cat([torch.relu(x), torch.relu(-x)], dim=-1)
+
+
+class VelocityMLP(nn.Module):
+    """in_dim -> `layers` x (Linear(., hidden), CReLU, Dropout) -> Linear(2 hidden, 2)."""
+
+    def __init__(self, in_dim: int, hidden: int = 70, layers: int = 4, dropout: float = 0.2, out_dim: int = 2):
+        super().__init__()
+        self.register_buffer("mean", torch.zeros(in_dim))
+        self.register_buffer("std", torch.ones(in_dim))
+        blocks: list[nn.Module] = []
+        width = in_dim
+        for _ in range(layers):
+            blocks += [nn.Linear(width, hidden), CReLU(), nn.Dropout(dropout)]
+            width = 2 * hidden
+        blocks.append(nn.Linear(width, out_dim))
+        self.net = nn.Sequential(*blocks)
+        self.config = {"in_dim": in_dim, "hidden": hidden, "layers": layers, "dropout": dropout, "out_dim": out_dim}
+
+    def set_normalisation(self, features: np.ndarray) -> None:
+        """Input standardisation from the training inputs (N, in_dim)."""
+        x = torch.as_tensor(np.asarray(features), dtype=torch.float32)
+        self.mean.copy_(x.mean(dim=0))
+        self.std.copy_(x.std(dim=0, unbiased=False).clamp_min(1e-6))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.net((x - self.mean) / self.std)
+
+
+def box_features(boxes: np.ndarray, calib: Calibration, sigma: float) -> np.ndarray:
+    """vec(g(b)) of tracks (N, T, 4) in standardised image coordinates: float32 (N, 4T)."""
+    b = gaussian_smooth(boxes, sigma)
+    norm = np.stack([(b[..., 0] - calib.cx) / calib.fx, (b[..., 1] - calib.cy) / calib.fy,
+                     b[..., 2] / calib.fx, b[..., 3] / calib.fy], axis=-1)
+    return norm.reshape(norm.shape[0], norm.shape[-2] * 4).astype(np.float32)
+
+
+def velocity_loss(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """Unreduced ||V - Psi(b)||^2 per track."""
+    return ((pred - target) ** 2).sum(dim=-1)
+
+
+def train_mlp(features: np.ndarray, targets: np.ndarray, *, hidden: int, layers: int, dropout: float, lr: float,
+              lr_decay: float, epochs: int, batch_size: int, seed: int,
+              eval_sets: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,
+              on_epoch: Callable[[int, dict], None] | None = None) -> tuple[VelocityMLP, list[dict]]:
+    """Train from scratch; returns the model (eval mode) and one dict per epoch: train_loss (mean
+    ||V - Psi(b)||^2 over the epoch's batches, dropout on), lr, and `<name>_loss` for every eval set (dropout
+    off; monitoring only, never used to select anything)."""
+    if len(features) == 0:
+        raise ValueError("no training tracks")
+    torch.manual_seed(seed)
+    gen = torch.Generator().manual_seed(seed)
+    x = torch.as_tensor(features, dtype=torch.float32)
+    y = torch.as_tensor(targets, dtype=torch.float32)
+    model = VelocityMLP(x.shape[1], hidden, layers, dropout)
+    model.set_normalisation(features)
+    opt = torch.optim.Adam(model.parameters(), lr=lr)
+    sched = torch.optim.lr_scheduler.ExponentialLR(opt, gamma=lr_decay)
+    evals = {k: (torch.as_tensor(a, dtype=torch.float32), torch.as_tensor(b, dtype=torch.float32))
+             for k, (a, b) in (eval_sets or {}).items() if len(a)}
+    curve = []
+    n = len(x)
+    for epoch in range(epochs):
+        model.train()
+        order = torch.randperm(n, generator=gen)
+        total = 0.0
+        for start in range(0, n, batch_size):
+            idx = order[start:start + batch_size]
+            loss = velocity_loss(model(x[idx]), y[idx]).mean()
+            opt.zero_grad(set_to_none=True)
+            loss.backward()
+            opt.step()
+            total += loss.detach().item() * len(idx)
+        row = {"train_loss": total / n, "lr": opt.param_groups[0]["lr"]}
+        sched.step()
+        if evals:
+            model.eval()
+            with torch.no_grad():
+                for name, (ex, ey) in evals.items():
+                    row[f"{name}_loss"] = float(velocity_loss(model(ex), ey).mean())
+        curve.append(row)
+        if on_epoch is not None:
+            on_epoch(epoch, row)
+    model.eval()
+    return model, curve
+
+
+def predict(model: VelocityMLP, features: np.ndarray) -> np.ndarray:
+    """(N, 2) velocity estimates [vx, vz] (eval mode, no gradients)."""
+    model.eval()
+    with torch.no_grad():
+        return model(torch.as_tensor(features, dtype=torch.float32)).numpy().astype(np.float64)
+
+
+def save_model(model: VelocityMLP, path, extra: dict | None = None) -> None:
+    """torch.save of the state and its construction arguments (to `path`.part, then renamed)."""
+    import os
+
+    tmp = f"{path}.part"
+    torch.save({"config": model.config, "state_dict": model.state_dict(), **(extra or {})}, tmp)
+    os.replace(tmp, path)
+
+
+def load_model(path) -> tuple[VelocityMLP, dict]:
+    blob = torch.load(path, map_location="cpu", weights_only=False)
+    model = VelocityMLP(**blob["config"])
+    model.load_state_dict(blob["state_dict"])
+    model.eval()
+    return model, blob
+
+
+def forward_time_ms(model: VelocityMLP, boxes: np.ndarray, calib: Calibration, sigma: float,
+                    repeats: int = 200) -> dict[str, float]:
+    """Time per track of the whole estimator Psi (smoothing, features, forward pass), one track at a time,
+    on the current torch threads: median and 90th percentile over `repeats` calls (after 10 warm-up calls)."""
+    model.eval()
+    track = np.asarray(boxes[:1], dtype=np.float64)
+
+    def once():
+        with torch.no_grad():
+            model(torch.from_numpy(box_features(track, calib, sigma)))
+
+    for _ in range(10):
+        once()
+    times = []
+    for _ in range(max(repeats, 1)):
+        start = time.perf_counter()
+        once()
+        times.append((time.perf_counter() - start) * 1000.0)
+    return {"forward_ms_median": statistics.median(times), "forward_ms_p90": float(np.percentile(times, 90))}

@@ -1,0 +1,73 @@
+"""Snakemake entry point: train one configuration of the ch. 7 detector and evaluate it on the test split."""
+import sys
+
+sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821  (log first)
+
+import json  # noqa: E402
+import os  # noqa: E402
+
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
+
+from redsup.det3d.template import TemplateSpec, build_template  # noqa: E402
+from redsup.fileio import save_npz_atomic, write_text_atomic  # noqa: E402
+from redsup.lidar_detector.augment import AugmentSpec  # noqa: E402
+from redsup.lidar_detector.data import load_split  # noqa: E402
+from redsup.lidar_detector.evaluate import evaluate_split  # noqa: E402
+from redsup.lidar_detector.figures import bev_figure, curves_figure  # noqa: E402
+from redsup.lidar_detector.grid import GridSpec  # noqa: E402
+from redsup.lidar_detector.postprocess import InferSpec  # noqa: E402
+from redsup.lidar_detector.train import RunSpec, TrainSpec, train  # noqa: E402
+from redsup.runlog import child_run  # noqa: E402
+
+sm = snakemake  # noqa: F821
+torch.set_num_threads(sm.threads)
+cfg = sm.config["lidar_detector"]
+name = sm.wildcards.run
+tables = [t for t, rows in cfg["tables"].items() if name in rows.values()]
+device = cfg["device"] if cfg["device"] != "auto" else ("cuda" if torch.cuda.is_available() else "cpu")
+run_spec = RunSpec.from_config(cfg["runs"][name])
+grid = GridSpec.from_config(cfg["grid"])
+train_spec = TrainSpec.from_config(cfg["train"] | {"min_points": cfg["min_points"], "max_points": cfg["max_points"]})
+with child_run(sm.log.run, tables[0] if tables else "mccraith_ch7_table1", name, rule=sm.rule,
+               wildcards=dict(sm.wildcards), config=sm.config,
+               params={"run": cfg["runs"][name], "tables": tables, "grid": cfg["grid"], "train": cfg["train"],
+                       "augment": cfg["augment"], "network": cfg["network"], "yaw_bins": cfg["yaw_bins"],
+                       "device": device}) as run:
+    train_data, test_data = load_split(sm.input.train), load_split(sm.input.test)
+    print(f"{name}: {run_spec}; {train_data.n_frames} training frames, {test_data.n_frames} test frames; "
+          f"data counts train {train_data.counts} test {test_data.counts}")
+    template = build_template(TemplateSpec(voxel=float(cfg["template_voxel"])))
+    history: dict = {}
+
+    def log(metrics, step):
+        run.log_metrics(metrics, step=step)
+        for k, v in metrics.items():
+            history.setdefault(k, []).append((step, v))
+        print(f"step {step}: " + ", ".join(f"{k[6:]} {v:.4g}" for k, v in metrics.items()))
+
+    model, summary = train(train_data, run_spec, grid, train_spec, AugmentSpec.from_config(cfg["augment"]), template,
+                           n_bins=int(cfg["yaw_bins"]), net=cfg["network"], seed=int(sm.config["seed"]),
+                           device=device, log=log)
+    metrics, dets = evaluate_split(model, test_data, grid, InferSpec.from_config(cfg["infer"]), template.size,
+                                   device=device, iou_thresholds=tuple(cfg["eval"]["iou"]))
+    metrics |= summary
+    metrics |= {f"data_train_{k}": float(v) for k, v in train_data.counts.items()}
+    run.log_metrics({k: v for k, v in metrics.items() if np.isfinite(v)})
+    print(json.dumps(metrics, indent=1))
+
+    tmp = sm.output.model + ".part"
+    torch.save({"state_dict": model.state_dict(), "run": cfg["runs"][name], "grid": cfg["grid"],
+                "network": cfg["network"], "yaw_bins": cfg["yaw_bins"]}, tmp)
+    os.replace(tmp, sm.output.model)
+    counts = [len(d.score) for d in dets]
+    save_npz_atomic(sm.output.detections, frame=np.repeat(np.arange(len(dets)), counts),
+                    boxes=np.concatenate([d.boxes for d in dets]) if dets else np.zeros((0, 7)),
+                    bbox=np.concatenate([d.bbox for d in dets]) if dets else np.zeros((0, 4)),
+                    score=np.concatenate([d.score for d in dets]) if dets else np.zeros(0))
+    run.log_figure(curves_figure(history, f"{name}: training curves"), "curves.png")
+    best = int(np.argmax([len(test_data.gt_boxes(f)) for f in range(test_data.n_frames)]))
+    run.log_figure(bev_figure(test_data.points(best), test_data.supervised_boxes(best, 1), dets[best].boxes,
+                              dets[best].score, grid, f"{name}: test frame {best} (green gt seen by the camera, "
+                              "red detections)"), "bev_test_frame.png")
+    write_text_atomic(sm.output.metrics, json.dumps(metrics, indent=1, sort_keys=True) + "\n")

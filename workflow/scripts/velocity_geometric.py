@@ -1,0 +1,26 @@
+"""Snakemake entry point: the geometric baseline of McCraith ch. 3 eq. (1) on the test splits."""
+import sys
+
+sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821  (log first)
+
+from pathlib import Path  # noqa: E402
+
+from redsup.runlog import child_run  # noqa: E402
+from redsup.velocity.data import load_split  # noqa: E402
+from redsup.velocity.experiment import run_geometric  # noqa: E402
+from redsup.velocity.report import write_configuration_outputs  # noqa: E402
+
+sm = snakemake  # noqa: F821
+vcfg = sm.config["velocity"]
+configuration = next(c for c in vcfg["configurations"] if c["name"] == sm.wildcards.config)
+with child_run(sm.log.run, configuration["table"], configuration["label"], rule=sm.rule,
+               wildcards=dict(sm.wildcards), config=sm.config,
+               params={"configuration": configuration, "geometric": vcfg["geometric"],
+                       "min_box_px": vcfg["min_box_px"]}) as run:
+    splits = {Path(c).name: load_split(t, c, vcfg["min_box_px"]) for t, c in zip(sm.input.tracks, sm.input.clips)}
+    metrics, predictions = run_geometric(splits, fps=sm.config["velocity_clips"]["fps"],
+                                         window=vcfg["geometric"]["window"],
+                                         timing_repeats=vcfg["mlp"]["timing_repeats"])
+    write_configuration_outputs(configuration, metrics, predictions, splits, sm.output.metrics, sm.output.predictions)
+    run.log_metrics(metrics)
+    print(metrics)

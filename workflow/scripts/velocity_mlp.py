@@ -1,0 +1,43 @@
+"""Snakemake entry point: train one MLP configuration of McCraith ch. 3 (tracker or synthetic tracks) and
+evaluate it on the test splits."""
+import sys
+
+sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821  (log first)
+
+import json  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import torch  # noqa: E402
+
+from redsup.prep.seeds import derive_seed  # noqa: E402
+from redsup.runlog import child_run  # noqa: E402
+from redsup.velocity.data import load_split  # noqa: E402
+from redsup.velocity.experiment import run_mlp  # noqa: E402
+from redsup.velocity.mlp import save_model  # noqa: E402
+from redsup.velocity.report import write_configuration_outputs  # noqa: E402
+
+sm = snakemake  # noqa: F821
+torch.set_num_threads(sm.threads)
+vcfg = sm.config["velocity"]
+configuration = next(c for c in vcfg["configurations"] if c["name"] == sm.wildcards.config)
+seed = derive_seed(sm.config["seed"], "velocity", configuration["name"])
+params = {"configuration": configuration, "mlp": vcfg["mlp"], "smoothing_sigma": vcfg["smoothing_sigma"],
+          "synthetic": vcfg["synthetic"], "min_box_px": vcfg["min_box_px"], "seed": seed}
+with child_run(sm.log.run, configuration["table"], configuration["label"], rule=sm.rule,
+               wildcards=dict(sm.wildcards), config=sm.config, params=params) as run:
+    train = load_split(sm.input.train_tracks, sm.input.train_clips, vcfg["min_box_px"])
+    splits = {Path(c).name: load_split(t, c, vcfg["min_box_px"]) for t, c in zip(sm.input.tracks, sm.input.clips)}
+    stats = json.loads(Path(sm.input.generator[0]).read_text()) if sm.input.generator else None
+    print("training clips:", train.quality(), "bad input per clip:", train.bad_input_per_clip())
+
+    def on_epoch(epoch, row):
+        run.log_metrics(row, step=epoch)
+
+    metrics, predictions, model, curve = run_mlp(configuration, vcfg["mlp"], vcfg["smoothing_sigma"],
+                                                 vcfg["synthetic"]["samples"], train, splits, stats, seed,
+                                                 on_epoch=on_epoch)
+    save_model(model, sm.output.model, {"configuration": configuration, "smoothing_sigma": vcfg["smoothing_sigma"],
+                                        "calibration": train.calib.as_dict()})
+    write_configuration_outputs(configuration, metrics, predictions, splits, sm.output.metrics, sm.output.predictions)
+    run.log_metrics(metrics)
+    print(metrics)
