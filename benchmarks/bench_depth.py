@@ -1,14 +1,17 @@
 """Speed of the self-supervised depth library on CPU (run by hand, not a test).
 
-    python benchmarks/bench_depth.py                                  # 256x80 and 640x192, widths 16 and 64
-    python benchmarks/bench_depth.py --sizes 256x96 --widths 16 32 --batch 4 --repeats 5
+    python benchmarks/bench_depth.py                                  # 208x64 (default profile), width 16
+    python benchmarks/bench_depth.py --sizes 208x64 640x192 --widths 16 64 --batch 4 --repeats 5
 
 Per (input size, base width): the median over repeats of
 - a training step: forward of the depth and pose networks, the full monocular loss (prev/next sources,
   4 scales, auto-masking, smoothness), backward and an Adam step, batch ``--batch``; and images/s from it;
 - an adaptation step at batch 1 (vanilla SGD on the depth + pose encoders, BatchNorm frozen), as in
   McCraith ch. 4 (the sequential / instance-wise speed ratio follows: 5 vs 50 steps per frame);
-- inference (depth network only) at batch 1.
+- inference (depth network only) at batch 1;
+- the two test-time scenarios of ch. 4 Table 6 end to end on a short synthetic video (``--frames`` frames):
+  seconds per frame of instance-wise adaptation (``--instance-steps`` steps, weights reset per frame) and of
+  sequential adaptation (``--sequential-steps`` steps, weights carried over), and their ratio.
 Random inputs and random weights (the speed does not depend on them). ``torch.set_num_threads(--threads)``.
 """
 from __future__ import annotations
@@ -18,9 +21,10 @@ import functools
 import statistics
 import time
 
+import numpy as np
 import torch
 
-from redsup.depth import adaptation, networks, pipeline
+from redsup.depth import adaptation, data, experiments, networks, pipeline
 
 
 def _batch(b: int, h: int, w: int) -> dict:
@@ -65,13 +69,38 @@ def bench(h: int, w: int, width: int, batch: int, repeats: int) -> dict:
             "infer_s": infer_s, "seq5_s": infer_s + 5 * adapt_s, "inst50_s": infer_s + 50 * adapt_s}
 
 
+def bench_scenarios(h: int, w: int, width: int, frames: int, instance_steps: int, sequential_steps: int) -> dict:
+    """Seconds per frame of the instance-wise and sequential runners on a synthetic pan (ch. 4 Table 6)."""
+    torch.manual_seed(0)
+    models = networks.build_models(base_channels=width).eval()
+    rng = np.random.default_rng(0)
+    base = rng.integers(0, 255, size=(h, w + 4 * frames, 3), dtype=np.uint8)
+    images = np.stack([base[:, 4 * i:4 * i + w] for i in range(frames)])
+    K = np.array([[0.58 * w, 0.0, (w - 1) / 2], [0.0, 1.92 * h, (h - 1) / 2], [0.0, 0.0, 1.0]])
+    seq = experiments.EvalSequence(data.Sequence("bench", images, K), np.full((frames, h, w), 10.0, np.float32))
+    meta = {"min_depth": 0.1, "max_depth": 100.0}
+    kw = dict(sources=("prev", "next"), groups=("depth_encoder", "pose_encoder"), lr=0.1,
+              eval_cfg={"min_depth": 1e-3, "max_depth": 80.0, "crop": "garg"},
+              loss_kwargs={"noise_std": 1e-5, "min_depth": 0.1, "max_depth": 100.0}, metric_scale=False)
+    inner = [(0, t) for t in range(1, frames - 1)]
+    inst, _ = experiments.run_instance(models, meta, [seq], inner, checkpoints=[instance_steps], **kw)
+    seq_recs, _ = experiments.run_sequential(models, meta, [seq], steps=sequential_steps, **kw)
+    inst_s = statistics.mean(r["seconds"] for r in inst if r["seconds"] is not None)
+    seq_s = statistics.mean(r["seconds"] for r in seq_recs if r["seconds"] is not None)
+    return {"size": f"{w}x{h}", "width": width, "instance_s_per_frame": inst_s, "sequential_s_per_frame": seq_s,
+            "speed_ratio": inst_s / seq_s}
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    parser.add_argument("--sizes", nargs="+", default=["256x80", "640x192"], help="WxH")
-    parser.add_argument("--widths", nargs="+", type=int, default=[16, 64], help="ResNet base channels")
+    parser.add_argument("--sizes", nargs="+", default=["208x64"], help="WxH (208x64: the default profile)")
+    parser.add_argument("--widths", nargs="+", type=int, default=[16], help="ResNet base channels")
     parser.add_argument("--batch", type=int, default=4)
     parser.add_argument("--repeats", type=int, default=3)
     parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument("--frames", type=int, default=6, help="frames of the synthetic video (0: skip)")
+    parser.add_argument("--instance-steps", type=int, default=50)
+    parser.add_argument("--sequential-steps", type=int, default=5)
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     print(f"torch {torch.__version__}, {args.threads} threads, batch {args.batch}, median of {args.repeats}")
@@ -83,6 +112,17 @@ def main() -> None:
         for width in args.widths:
             r = bench(h, w, width, args.batch, args.repeats)
             print(" | ".join(f"{r[k]:.3f}" if isinstance(r[k], float) else str(r[k]) for k in header), flush=True)
+    if args.frames >= 3:
+        header = ("size", "width", "instance_s_per_frame", "sequential_s_per_frame", "speed_ratio")
+        print(f"\nscenarios on {args.frames} frames: instance-wise {args.instance_steps} steps vs sequential "
+              f"{args.sequential_steps} steps per frame")
+        print(" | ".join(header))
+        for size in args.sizes:
+            w, h = (int(v) for v in size.lower().split("x"))
+            for width in args.widths:
+                r = bench_scenarios(h, w, width, args.frames, args.instance_steps, args.sequential_steps)
+                print(" | ".join(f"{r[k]:.3f}" if isinstance(r[k], float) else str(r[k]) for k in header),
+                      flush=True)
 
 
 if __name__ == "__main__":

@@ -43,7 +43,7 @@ def _scene(normal=(0.0, -1.0, -0.035), empty_road_frame=None, seed=0):
     K2[:2] *= 2
     K2[:2, 2] += 0.5  # pixel-centre convention of a 2x resize
     metric, road = _metric_depth(K, SIZE, normal)
-    gt_full, _ = _metric_depth(K2, (2 * SIZE[0], 2 * SIZE[1]), normal)
+    gt_full, road_full = _metric_depth(K2, (2 * SIZE[0], 2 * SIZE[1]), normal)
     sparse = np.zeros(gt_full.shape, bool)
     sparse[::3, ::2] = True
     preds, gts, roads = [], [], []
@@ -57,7 +57,7 @@ def _scene(normal=(0.0, -1.0, -0.035), empty_road_frame=None, seed=0):
             mask[:] = False
         roads.append(mask)
     return inputs.SceneInputs("test_000", np.stack(preds).astype(np.float32), K, np.stack(gts).astype(np.float32),
-                              np.stack(roads))
+                              np.stack(roads), K2, np.stack([road_full] * len(SCALES)))
 
 
 def test_road_plane_recovers_the_per_frame_scale():
@@ -67,9 +67,12 @@ def test_road_plane_recovers_the_per_frame_scale():
     for (s, reason), truth in zip(scales, SCALES):
         assert reason is None
         assert s == pytest.approx(truth, rel=0.01)
-    # the per-frame GT ratio recovers it too (on the resized prediction, at the GT resolution)
+    # the per-frame GT ratio recovers it too (on the resized prediction, at the GT resolution), also on the
+    # road-box pixels only
     for (s, reason), truth in zip(methods.gt_scales(scene), SCALES):
         assert reason is None and s == pytest.approx(truth, rel=0.01)
+    for (s, reason), truth in zip(methods.road_gt_scales(scene, camera_height=H_CAM, length=30.0, width=3.0), SCALES):
+        assert reason is None and s == pytest.approx(truth, rel=0.02)  # ratio of medians over a car edge
 
 
 def test_evaluation_of_the_methods():
@@ -193,6 +196,33 @@ def test_tables_use_the_paper_row_and_column_names():
     results["fixed_plane"] = _fake_result(0.2, skipped=4)
     note = report.skipped_note(results, {"fixed_plane": "(c)", "gt_median": "GT"}, limit=2)
     assert note.startswith("Skipped frames: (c): 4 frame(s) skipped") and "+2 more" in note
-    fig = report.fig1_table([20.0, 40.0, None], [21.0, 38.0, 30.0], 30.0)
+    fig = report.fig1_table([20.0, 40.0, None], [21.0, 38.0, 30.0], 30.0, road_gt=[20.0, 38.0, 33.0])
     assert fig.loc[report.FIG1_GT_ROW, "max/min"] == pytest.approx(2.0)
-    assert fig.loc[report.FIG1_OURS_ROW, "median |ours / GT - 1|"] == pytest.approx(0.05)
+    assert fig.loc[report.FIG1_OURS_ROW, "median |x / GT - 1|"] == pytest.approx(0.05)
+    assert fig.loc[report.FIG1_SINGLE_ROW, "median |x / GT - 1|"] == pytest.approx(0.375)
+    assert fig.loc[report.FIG1_OURS_ROW, "median |ours / road GT - 1|"] == pytest.approx(0.05)
+
+
+def test_plan_lists_the_jobs_as_data():
+    from redsup.calib import plan
+
+    cal = {"dataset": "world_x", "mode": "M", "length": 30.0, "width": 3.0, "lengths": [6, 30], "widths": [0.5, 3]}
+    jobs = plan.table_methods(cal)
+    assert jobs["mccraith_ch5_table1"] == ["single_train", "single_test", "fixed_plane", "road_L30_W3", "gt_median"]
+    assert jobs["mccraith_ch5_table3"] == ["road_L6_W3", "road_L30_W3"]
+    assert jobs["mccraith_ch5_table4"] == ["road_L30_W0.5", "road_L30_W3"]
+    assert plan.result_files(cal, "mccraith_ch5_table2") == [
+        "results/calibration/world_x/M/gt_median.json", "results/calibration/world_x/M/road_L30_W3.json"]
+    config = {"calibration": cal, "detection": {"camera": "cam_front"}}
+    scenes = ["train_000", "train_001", "test_000", "long_000"]
+    files = plan.eval_inputs(config, scenes, "world_x", "M", "single_train")
+    assert files["pred"] == ["results/depth/predictions/world_x/M/test_000.npz"]
+    assert files["gt"] == ["results/prepared/world_x/test_000/cam_front_depth.npz"]
+    assert files["road"] == ["results/prepared/world_x/test_000/road.npz"]
+    assert files["train_pred"] == [f"results/depth/predictions/world_x/M/train_00{i}.npz" for i in (0, 1)]
+    assert "train_pred" not in plan.eval_inputs(config, scenes, "world_x", "M", "road_L6_W3")
+    assert plan.scene_files(config, scenes, "pred", "long") == ["results/depth/predictions/world_x/M/long_000.npz"]
+    import re
+
+    for name in ("gt_median", "single_train", "road_L30_W0.5"):
+        assert re.fullmatch(plan.METHOD_PATTERN, name) and methods.parse_method(name)

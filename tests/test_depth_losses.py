@@ -90,3 +90,11 @@ def test_self_supervised_loss_composition():
     assert t2["photometric"].item() == pytest.approx(0.0, abs=1e-6) and t2["automask_fraction"].item() == 1.0
     with pytest.raises(ValueError, match="scales"):
         losses.self_supervised_loss(target, warped[:2], identity, disps)
+
+
+def test_precomputed_target_statistics_give_the_same_error():
+    torch.manual_seed(3)
+    x, y = torch.rand(2, 3, 12, 20), torch.rand(2, 3, 12, 20)
+    stats = losses.ssim_stats(y)
+    assert torch.allclose(losses.ssim(x, y, y_stats=stats), losses.ssim(x, y))
+    assert torch.allclose(losses.photometric_error(x, y, 0.85, stats), losses.photometric_error(x, y, 0.85))

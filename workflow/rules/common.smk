@@ -27,10 +27,11 @@ ADAPTER_DATASETS = [d for d, spec in config["datasets"].items() if spec["kind"] 
 CLIP_SOURCE = config["velocity_clips"].get("source")
 SOURCE_CLIP_SPLITS = [s for s in CLIP_SPLIT_NAMES if CLIP_SOURCE and s in CLIP_SOURCE["splits"]]
 WORLD_CLIP_SPLITS = [s for s in CLIP_SPLIT_NAMES if s not in SOURCE_CLIP_SPLITS]
-if CLIP_SOURCE and set(CLIP_SOURCE["splits"]) - set(CLIP_SPLIT_NAMES):
+_unknown_clip_splits = sorted(set(CLIP_SOURCE["splits"]) - set(CLIP_SPLIT_NAMES)) if CLIP_SOURCE else []
+if _unknown_clip_splits:
     raise redsup.config.ConfigError(
-        f"config.yaml: velocity_clips.source.splits names {sorted(set(CLIP_SOURCE['splits']) - set(CLIP_SPLIT_NAMES))}, "
-        f"which are not clip splits (velocity_clips.splits: {CLIP_SPLIT_NAMES})")
+        f"config.yaml: velocity_clips.source.splits names {_unknown_clip_splits}, which are not clip splits "
+        f"(velocity_clips.splits: {CLIP_SPLIT_NAMES})")
 
 
 wildcard_constraints:

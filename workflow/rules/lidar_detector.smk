@@ -2,43 +2,19 @@
 # Appends its ids to TABLE_IDS / FIGURE_IDS (see common.smk).
 TABLE_IDS += ["mccraith_ch7_table1", "mccraith_ch7_table2", "mccraith_ch7_table3"]
 
+import redsup.lidar_detector.dag as ld_dag
+
 LD = config["lidar_detector"]
 LD_RUNS = list(LD["runs"])
 LD_TABLES = list(LD["tables"])
 # the ch. 6 method on the same split (Table 1's "McCraith et al. [2022] †" row): written by the lifting stage
 LD_LIFTING_METRICS = "results/lifting/metrics/full_cityscapes.json"
-for _table, _rows in LD["tables"].items():
-    _unknown = sorted(set(_rows.values()) - set(LD_RUNS))
-    if _unknown:
-        raise ValueError(f"config.yaml lidar_detector.tables.{_table}: unknown configurations {_unknown} "
-                         f"(defined: {LD_RUNS})")
-
-
-def _ld_split_scenes(split):
-    """Scenes of the detector's dataset used for a split: train = train + long scenes, test = test scenes."""
-    prefixes = ("train_", "long_") if split == "train" else ("test_",)
-    return [s for s in scenes_of(LD["dataset"]) if s.startswith(prefixes)]
-
-
-def _ld_split_inputs(wildcards):
-    scenes = _ld_split_scenes(wildcards.split)
-    return {
-        "scenes": [f"results/raw/{LD['dataset']}/{s}" for s in scenes],
-        "detections": [f"results/prepared/{LD['dataset']}/{s}/detections_{LD['level']}.npz" for s in scenes],
-    }
-
-
-def _ld_table_inputs(wildcards):
-    runs = sorted(set(LD["tables"][wildcards.table].values()))
-    out = {"metrics": expand("results/lidar_detector/metrics/{run}.json", run=runs)}
-    if wildcards.table == "mccraith_ch7_table1":
-        out["lifting"] = LD_LIFTING_METRICS
-    return out
+ld_dag.check_tables(LD)
 
 
 rule lidar_detector_split:
     input:
-        unpack(_ld_split_inputs),
+        unpack(lambda wc: ld_dag.split_inputs(LD, scenes_of(LD["dataset"]), wc.split)),
     output:
         "results/lidar_detector/data/{split}.npz",
     log:
@@ -81,7 +57,7 @@ rule lidar_detector_train:
 
 rule lidar_detector_table:
     input:
-        unpack(_ld_table_inputs),
+        unpack(lambda wc: ld_dag.table_inputs(LD, wc.table, LD_LIFTING_METRICS)),
     output:
         md="results/tables/{table}.md",
         csv="results/tables/{table}.csv",

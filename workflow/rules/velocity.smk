@@ -5,21 +5,17 @@ FIGURE_IDS += ["mccraith_ch3_fig3", "mccraith_ch3_fig6"]
 
 # the configurations (config velocity.configurations) as data: one job and one child run each
 VELOCITY_CONFIGS = {c["name"]: c for c in config["velocity"]["configurations"]}
-VELOCITY_GEOMETRIC = [n for n, c in VELOCITY_CONFIGS.items() if c["method"] == "geometric"]
+VELOCITY_BASELINES = [n for n, c in VELOCITY_CONFIGS.items() if c["method"] in ("geometric", "constant")]
 VELOCITY_MLP = [n for n, c in VELOCITY_CONFIGS.items() if c["method"] == "mlp"]
 VELOCITY_EVAL_SPLITS = [s for s in ("test", "abnormal") if s in CLIP_SPLIT_NAMES]
 
 
-def velocity_metrics_of(tables):
-    """metrics.json of the configurations whose parent table is one of `tables`."""
-    names = [n for n, c in VELOCITY_CONFIGS.items() if c["table"] in tables]
-    return expand("results/velocity/{config}/metrics.json", config=names)
-
-
-def velocity_generator_input(wildcards):
-    """The fitted generator, for configurations trained on synthetic tracks."""
-    uses = VELOCITY_CONFIGS[wildcards.config].get("train_on") == "synthetic"
-    return ["results/velocity/generator_statistics.json"] if uses else []
+# metrics of the configurations whose parent run is Table II, and of all of them (the ablation table)
+VELOCITY_TABLE2_METRICS = expand(
+    "results/velocity/{config}/metrics.json",
+    config=[n for n, c in VELOCITY_CONFIGS.items() if c["table"] == "mccraith_ch3_table2"],
+)
+VELOCITY_ALL_METRICS = expand("results/velocity/{config}/metrics.json", config=list(VELOCITY_CONFIGS))
 
 
 rule velocity_fit_generator:
@@ -41,10 +37,12 @@ rule velocity_fit_generator:
         "../scripts/velocity_fit.py"
 
 
-rule velocity_geometric:
+rule velocity_baseline:
     input:
         tracks=expand("results/prepared/clips/{split}/medianflow.npz", split=VELOCITY_EVAL_SPLITS),
         clips=expand("results/raw/clips/{split}", split=VELOCITY_EVAL_SPLITS),
+        train_tracks="results/prepared/clips/train/medianflow.npz",
+        train_clips="results/raw/clips/train",
     output:
         metrics="results/velocity/{config}/metrics.json",
         predictions="results/velocity/{config}/predictions.npz",
@@ -52,7 +50,7 @@ rule velocity_geometric:
         "results/logs/velocity/{config}.log",
         run="results/runs/velocity/{config}.json",
     wildcard_constraints:
-        config="|".join(VELOCITY_GEOMETRIC),
+        config="|".join(VELOCITY_BASELINES),
     threads: 1
     resources:
         mem_mb=1000,
@@ -60,7 +58,7 @@ rule velocity_geometric:
     conda:
         ENV
     script:
-        "../scripts/velocity_geometric.py"
+        "../scripts/velocity_baseline.py"
 
 
 rule velocity_mlp:
@@ -69,7 +67,12 @@ rule velocity_mlp:
         clips=expand("results/raw/clips/{split}", split=VELOCITY_EVAL_SPLITS),
         train_tracks="results/prepared/clips/train/medianflow.npz",
         train_clips="results/raw/clips/train",
-        generator=velocity_generator_input,
+        # the fitted generator, for configurations trained on synthetic tracks
+        generator=lambda wc: (
+            ["results/velocity/generator_statistics.json"]
+            if VELOCITY_CONFIGS[wc.config].get("train_on") == "synthetic"
+            else []
+        ),
     output:
         metrics="results/velocity/{config}/metrics.json",
         predictions="results/velocity/{config}/predictions.npz",
@@ -91,7 +94,7 @@ rule velocity_mlp:
 
 rule mccraith_ch3_table2:
     input:
-        metrics=velocity_metrics_of(["mccraith_ch3_table2"]),
+        metrics=VELOCITY_TABLE2_METRICS,
     output:
         md="results/tables/mccraith_ch3_table2.md",
         csv="results/tables/mccraith_ch3_table2.csv",
@@ -112,7 +115,7 @@ rule mccraith_ch3_table2:
 
 rule mccraith_ch3_synthetic_ablation:
     input:
-        metrics=velocity_metrics_of(["mccraith_ch3_table2", "mccraith_ch3_synthetic_ablation"]),
+        metrics=VELOCITY_ALL_METRICS,
     output:
         md="results/tables/mccraith_ch3_synthetic_ablation.md",
         csv="results/tables/mccraith_ch3_synthetic_ablation.csv",

@@ -22,17 +22,19 @@ with child_run(sm.log.run, "mccraith_ch5_fig1", f"{cfg['figure_split']} scenes",
                                          "length": cfg["length"], "width": cfg["width"]}) as run:
     if not sm.input.pred:
         raise ValueError(f"{dataset} has no '{cfg['figure_split']}' scene for Fig. 1 (calibration.figure_split)")
-    gt, ours, names, skipped = [], [], [], []
+    gt, ours, road_gt, names, skipped = [], [], [], [], []
+    box = dict(camera_height=camera_height, length=cfg["length"], width=cfg["width"])
     for p, g, r in zip(sm.input.pred, sm.input.gt, sm.input.road):
         scene = inputs.load_scene(p, g, r, crop=spec["crop"], name=Path(p).stem)
         names.append(scene.name)
-        for i, ((s_gt, why_gt), (s, why)) in enumerate(zip(
+        for i, ((s_gt, why_gt), (s, why), (s_road, _)) in enumerate(zip(
                 methods.gt_scales(scene, **cfg["eval"]),
-                methods.road_scales(scene, camera_height=camera_height, length=cfg["length"], width=cfg["width"],
-                                    min_points=cfg["min_points"], n_iter=cfg["lmeds_iterations"],
-                                    max_tilt_deg=cfg["max_tilt_deg"], seed=sm.config["seed"]))):
+                methods.road_scales(scene, **box, min_points=cfg["min_points"], n_iter=cfg["lmeds_iterations"],
+                                    max_tilt_deg=cfg["max_tilt_deg"], seed=sm.config["seed"]),
+                methods.road_gt_scales(scene, **box, **cfg["eval"]))):
             gt.append(s_gt)
             ours.append(s)
+            road_gt.append(s_road)
             skipped += [f"{scene.name} frame {i}: GT scale: {why_gt}"] if why_gt else []
             skipped += [f"{scene.name} frame {i}: ours: {why}"] if why else []
     for message in skipped:
@@ -43,14 +45,16 @@ with child_run(sm.log.run, "mccraith_ch5_fig1", f"{cfg['figure_split']} scenes",
             run.log_metric("gt_scale", g, step=i)
         if o is not None:
             run.log_metric("ours_scale", o, step=i)
+        if road_gt[i] is not None:
+            run.log_metric("road_gt_scale", road_gt[i], step=i)
     title = (f"Per-frame GT scaling factor of the raw monocular depth ({cfg['mode']}), "
              f"{dataset} {', '.join(names)}")
-    fig = report.fig1_plot(times, gt, ours, single, title)
+    fig = report.fig1_plot(times, gt, ours, single, title, road_gt)
     tmp = Path(sm.output.png).with_name("mccraith_ch5_fig1.part.png")
     fig.savefig(tmp, dpi=110)
     tmp.replace(sm.output.png)
     run.log_artifact(sm.output.png)
-    df = report.fig1_table(gt, ours, single)
+    df = report.fig1_table(gt, ours, single, road_gt)
     note = (f"Ours: {dataset} {', '.join(names)} ({len(gt)} frames), depth model {cfg['mode']}, profile "
             f"{sm.config['profile']}; the scale is in metres per network unit of our model (the thesis' KITTI "
             f"model has its own unit); ours = road plane |X| < {cfg['width']:g} m, Z < {cfg['length']:g} m. "

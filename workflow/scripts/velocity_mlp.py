@@ -13,7 +13,7 @@ from redsup.prep.seeds import derive_seed  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
 from redsup.velocity.data import load_split  # noqa: E402
 from redsup.velocity.experiment import run_mlp  # noqa: E402
-from redsup.velocity.mlp import save_model  # noqa: E402
+from redsup.velocity.mlp import resolve_device, save_model  # noqa: E402
 from redsup.velocity.report import write_configuration_outputs  # noqa: E402
 
 sm = snakemake  # noqa: F821
@@ -21,8 +21,9 @@ torch.set_num_threads(sm.threads)
 vcfg = sm.config["velocity"]
 configuration = next(c for c in vcfg["configurations"] if c["name"] == sm.wildcards.config)
 seed = derive_seed(sm.config["seed"], "velocity", configuration["name"])
+device = resolve_device(vcfg["device"])
 params = {"configuration": configuration, "mlp": vcfg["mlp"], "smoothing_sigma": vcfg["smoothing_sigma"],
-          "synthetic": vcfg["synthetic"], "min_box_px": vcfg["min_box_px"], "seed": seed}
+          "synthetic": vcfg["synthetic"], "min_box_px": vcfg["min_box_px"], "seed": seed, "device": device}
 with child_run(sm.log.run, configuration["table"], configuration["label"], rule=sm.rule,
                wildcards=dict(sm.wildcards), config=sm.config, params=params) as run:
     train = load_split(sm.input.train_tracks, sm.input.train_clips, vcfg["min_box_px"])
@@ -35,7 +36,7 @@ with child_run(sm.log.run, configuration["table"], configuration["label"], rule=
 
     metrics, predictions, model, curve = run_mlp(configuration, vcfg["mlp"], vcfg["smoothing_sigma"],
                                                  vcfg["synthetic"]["samples"], train, splits, stats, seed,
-                                                 on_epoch=on_epoch)
+                                                 on_epoch=on_epoch, device=device)
     save_model(model, sm.output.model, {"configuration": configuration, "smoothing_sigma": vcfg["smoothing_sigma"],
                                         "calibration": train.calib.as_dict()})
     write_configuration_outputs(configuration, metrics, predictions, splits, sm.output.metrics, sm.output.predictions)

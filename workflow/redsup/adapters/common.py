@@ -175,7 +175,7 @@ class SceneWriter:
 
     def write_boxes(self, rows: list[dict]) -> None:
         frame = pd.DataFrame(rows, columns=BOX_COLUMNS)
-        frame.to_csv(self.path("gt/boxes.csv"), index=False, float_format="%.6g")
+        frame.to_csv(self.path("gt/boxes.csv"), index=False, float_format="%.9g")
 
 
 def empty_box_row(frame: int, track_id: int, cls: str) -> dict:

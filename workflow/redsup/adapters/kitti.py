@@ -32,9 +32,9 @@ from redsup.sceneio import BOX_COLUMNS, frame_name, read_lidar
 FPS = 10.0
 RAW_CAMERAS = {"cam_front": "02", "cam_front_right": "03"}
 OBJECT_CAMERAS = {"cam_front": "2", "cam_front_right": "3"}
-LABEL_FIELDS = ["cls", "truncation", "occlusion", "alpha", "x1", "y1", "x2", "y2", "h", "w", "l", "cx", "cy", "cz", "ry"]
+LABEL_FIELDS = [
+    "cls", "truncation", "occlusion", "alpha", "x1", "y1", "x2", "y2", "h", "w", "l", "cx", "cy", "cz", "ry"]
 EARTH_RADIUS = 6378137.0
-SPLIT_NAMES = ("train", "test", "long")
 
 
 # --------------------------------------------------------------------------------------- calibration
@@ -296,7 +296,8 @@ def adapt_raw(dataset: str, spec: dict, scene: str, out_dir: str | Path, seed: i
         T_imu_vehicle = translation([0.0, 0.0, -float(spec.get("imu_height", 0.93))])
         poses, pose_source = T_world_imu @ T_imu_vehicle, "oxts"
     else:
-        poses, pose_source = np.tile(np.eye(4), (n, 1, 1)), "identity (no oxts: camera and LiDAR of a frame are simultaneous)"
+        poses = np.tile(np.eye(4), (n, 1, 1))
+        pose_source = "identity (no oxts: camera and LiDAR of a frame are simultaneous)"
     convention = spec.get("depth_convention", "monodepth2")
     frames2d = Frames2D(spec, spec["path"])
     rows: list[dict] = []
@@ -352,7 +353,8 @@ def adapt_object(dataset: str, spec: dict, scene: str, out_dir: str | Path, seed
     rows = [label_to_row(lab, 0, k + 1, T_vehicle_rect0) for k, lab in enumerate(labels)]
     for row in rows:
         if np.isfinite(row["x"]):
-            row["n_lidar"] = int(points_in_box(points_vehicle, [row[k] for k in ("x", "y", "z", "l", "w", "h", "yaw")]).sum())
+            box = [row[k] for k in ("x", "y", "z", "l", "w", "h", "yaw")]
+            row["n_lidar"] = int(points_in_box(points_vehicle, box).sum())
     frames2d = Frames2D(spec, spec["path"])
     with SceneWriter(out_dir, link=not spec.get("copy_files", False)) as w:
         for camera in cameras:

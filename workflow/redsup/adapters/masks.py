@@ -20,8 +20,6 @@ import numpy as np
 from redsup.adapters import rle
 from redsup.adapters.common import AdapterError
 
-ROAD_LABEL = 7  # Cityscapes label id of road
-
 
 def _polygons_to_mask(polygons, size: tuple[int, int]) -> np.ndarray:
     width, height = size
@@ -143,8 +141,8 @@ def instances_from_boxes(labels: list[dict], size: tuple[int, int]) -> np.ndarra
             and np.all(np.isfinite([r["x1"], r["y1"], r["x2"], r["y2"]]))]
     rows.sort(key=lambda r: -(np.hypot(r["x"], r["y"]) if np.isfinite(r["x"]) else 0.0))
     for r in rows:
-        c0, c1 = int(np.ceil(r["x1"] - 0.5)), int(np.floor(r["x2"] - 0.5))
-        r0, r1 = int(np.ceil(r["y1"] - 0.5)), int(np.floor(r["y2"] - 0.5))
+        c0, c1 = int(np.ceil(r["x1"])), int(np.floor(r["x2"]))
+        r0, r1 = int(np.ceil(r["y1"])), int(np.floor(r["y2"]))
         c0, r0 = max(c0, 0), max(r0, 0)
         c1, r1 = min(c1, width - 1), min(r1, height - 1)
         if c1 >= c0 and r1 >= r0:

@@ -25,6 +25,8 @@ class SceneInputs:
     K: np.ndarray  # (3, 3) intrinsics of pred
     gt: np.ndarray | None = None  # (T, H, W) float32 LiDAR depth (0 = none)
     road: np.ndarray | None = None  # (T, h, w) bool road masks at the prediction's resolution
+    gt_K: np.ndarray | None = None  # (3, 3) intrinsics of gt (the crop of the raw camera)
+    road_gt: np.ndarray | None = None  # (T, H, W) bool road masks cropped to the ground truth (diagnostics)
 
     @property
     def n_frames(self) -> int:
@@ -78,6 +80,7 @@ def load_scene(pred_path: str | Path, gt_path: str | Path | None = None, road_pa
     if gt_path is not None:
         with np.load(gt_path, allow_pickle=False) as data:
             gt = np.asarray(data["depth"], dtype=np.float32)
+            scene.gt_K = np.asarray(data["K"], dtype=np.float64)[:3, :3] if "K" in data.files else None
         if len(gt) != len(pred):
             raise ValueError(f"{gt_path}: {len(gt)} ground-truth frames but {pred_path} has {len(pred)}")
         scene.gt = gt
@@ -95,5 +98,8 @@ def load_scene(pred_path: str | Path, gt_path: str | Path | None = None, road_pa
             if tuple(scene.gt.shape[1:]) != expect:
                 raise ValueError(f"{road_path}: masks of {raw_w}x{raw_h} cropped by {crop} give {expect[::-1]} "
                                  f"but the ground truth {gt_path} is {scene.gt.shape[2]}x{scene.gt.shape[1]}")
-        scene.road = np.stack([crop_resize_nearest(masks_io.road_of(road, i), crop, out_size) for i in range(n)])
+        raw = np.stack([masks_io.road_of(road, i) for i in range(n)])
+        scene.road = crop_resize_nearest(raw, crop, out_size)
+        if scene.gt is not None:
+            scene.road_gt = crop_resize_nearest(raw, crop, (scene.gt.shape[2], scene.gt.shape[1]))
     return scene

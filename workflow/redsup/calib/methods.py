@@ -22,16 +22,12 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from redsup.calib.inputs import SceneInputs, resize_depth
+from redsup.calib.plan import road_method  # noqa: F401  (re-exported)
 from redsup.depth import calibration, evaluation
 from redsup.prep.seeds import derive_seed
 
 BASELINES = ("gt_median", "single_train", "single_test", "fixed_plane")
 _ROAD = re.compile(r"road_L(?P<length>[0-9]+(?:\.[0-9]+)?)_W(?P<width>[0-9]+(?:\.[0-9]+)?)")
-
-
-def road_method(length: float, width: float) -> str:
-    """Name of the road-plane configuration with these limits (m), e.g. ``road_L30_W3``."""
-    return f"road_L{float(length):g}_W{float(width):g}"
 
 
 def parse_method(name: str) -> dict:
@@ -54,6 +50,27 @@ def gt_scales(scene: SceneInputs, **eval_kw) -> list[tuple[float | None, str | N
     for i in range(scene.n_frames):
         pred = resize_depth(scene.pred[i], scene.gt.shape[1:])
         out.append(calibration.per_frame_gt_scale(scene.gt[i], pred, **eval_kw))
+    return out
+
+
+def road_gt_scales(scene: SceneInputs, *, camera_height: float, length: float, width: float, min_depth: float = 1e-3,
+                   max_depth: float = 80.0, crop: str | None = None) -> list[tuple[float | None, str | None]]:
+    """Diagnostic: the GT median ratio (eq. 4) restricted to the road pixels of the road box (the pixels our
+    plane is fitted to), at the ground-truth resolution. Where ours differs from it, the plane fit (or the
+    network's road geometry) is at fault; where this differs from the all-pixel GT scale, the network's depth
+    is not a single scaling of the true depth (road vs the rest). ``crop`` is ignored (the road box is the
+    selection)."""
+    if scene.road_gt is None or scene.gt_K is None:
+        raise ValueError(f"{scene.name}: road masks at the ground-truth resolution and its intrinsics are needed")
+    out = []
+    for i in range(scene.n_frames):
+        gt = scene.gt[i]
+        pred = resize_depth(scene.pred[i], gt.shape)
+        sel = calibration.road_selection(scene.road_gt[i], scene.gt_K, camera_height, length, width)
+        sel &= evaluation.valid_mask(gt, min_depth=min_depth, max_depth=max_depth, crop=None)
+        sel &= np.isfinite(pred) & (pred > 0)
+        out.append((evaluation.median_scale(gt, pred, sel), None) if sel.any()
+                   else (None, f"no road pixel with ground truth within |X| < {width:g} m, Z < {length:g} m"))
     return out
 
 

@@ -27,6 +27,7 @@ TABLE2_ROWS = {"gt_median": "Godard et al. [2019]", "ours": "Ours"}
 FIG1_GT_ROW = "per-frame GT scaling factor"
 FIG1_SINGLE_ROW = "GT Single Scaling (training set)"
 FIG1_OURS_ROW = "Ours (road plane, per frame)"
+FIG1_ROAD_ROW = "GT scaling on the road-box pixels (diagnostic)"
 
 
 def metrics_row(result: Mapping) -> dict:
@@ -93,20 +94,29 @@ def _stats(values) -> dict:
             "max/min": float(v.max() / v.min()), "frames": int(len(v))}
 
 
-def fig1_table(gt: Sequence[float | None], ours: Sequence[float | None], single_train: float) -> pd.DataFrame:
+def _median_dev(a: Sequence[float | None], b: Sequence[float | None]) -> float:
+    dev = [abs(x / y - 1.0) for x, y in zip(a, b) if x is not None and y is not None]
+    return float(np.median(dev)) if dev else float("nan")
+
+
+def fig1_table(gt: Sequence[float | None], ours: Sequence[float | None], single_train: float,
+               road_gt: Sequence[float | None] | None = None) -> pd.DataFrame:
     """Summary of Fig. 1: statistics of the per-frame GT scaling factor along the sequence, the training-set
-    single scale, and our per-frame road-plane scale with its median relative deviation from the GT one."""
-    rows = {FIG1_GT_ROW: _stats(gt), FIG1_SINGLE_ROW: {"scaling factor": float(single_train)},
-            FIG1_OURS_ROW: _stats(ours)}
-    dev = [abs(o / g - 1.0) for g, o in zip(gt, ours) if g is not None and o is not None]
-    rows[FIG1_OURS_ROW]["median |ours / GT - 1|"] = float(np.median(dev)) if dev else float("nan")
-    dev_single = [abs(single_train / g - 1.0) for g in gt if g is not None]
-    rows[FIG1_SINGLE_ROW]["median |single / GT - 1|"] = float(np.median(dev_single)) if dev_single else float("nan")
+    single scale, and our per-frame road-plane scale with its median relative deviation from the GT one
+    (``median |x / GT - 1|``). With ``road_gt`` (the GT ratio on the road-box pixels only, a diagnostic) a
+    row for it and ours' deviation from it (``median |ours / road GT - 1|``)."""
+    rows = {FIG1_GT_ROW: _stats(gt),
+            FIG1_SINGLE_ROW: {"scaling factor": float(single_train),
+                              "median |x / GT - 1|": _median_dev([single_train] * len(gt), gt)},
+            FIG1_OURS_ROW: {**_stats(ours), "median |x / GT - 1|": _median_dev(ours, gt)}}
+    if road_gt is not None:
+        rows[FIG1_ROAD_ROW] = {**_stats(road_gt), "median |x / GT - 1|": _median_dev(road_gt, gt)}
+        rows[FIG1_OURS_ROW]["median |ours / road GT - 1|"] = _median_dev(ours, road_gt)
     return _frame(rows, "series")
 
 
 def fig1_plot(times: Sequence[float], gt: Sequence[float | None], ours: Sequence[float | None], single_train: float,
-              title: str):
+              title: str, road_gt: Sequence[float | None] | None = None):
     """The per-frame GT scale factor of the raw output along the sequence, with our road-plane scale and the
     single training-set scale."""
     import matplotlib
@@ -120,6 +130,8 @@ def fig1_plot(times: Sequence[float], gt: Sequence[float | None], ours: Sequence
     fig, ax = plt.subplots(figsize=(8, 3.4))
     ax.plot(times, arr(gt), color="black", lw=1.4, label="GT scaling (per frame, LiDAR)")
     ax.plot(times, arr(ours), color="tab:blue", lw=1.0, ls="--", label="ours (road plane, camera height)")
+    if road_gt is not None:
+        ax.plot(times, arr(road_gt), color="tab:green", lw=0.8, alpha=0.8, label="GT scaling on road-box pixels")
     ax.axhline(single_train, color="tab:red", lw=1.0, ls=":", label="GT single scaling (training set)")
     ax.set_xlabel("time (s)")
     ax.set_ylabel("scaling factor (m / network unit)")

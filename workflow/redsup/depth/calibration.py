@@ -56,9 +56,11 @@ def fit_plane_lmeds(points: np.ndarray, n_iter: int = 300, seed: int = 0, refine
     normals = normals[ok] / norms[ok, None]
     offsets = -np.einsum("ij,ij->i", normals, a[ok])
     best_med, best = np.inf, 0
+    pts_t = np.ascontiguousarray(pts.T)
     for start in range(0, len(normals), chunk):
-        res = pts @ normals[start:start + chunk].T + offsets[start:start + chunk]  # (N, chunk)
-        med = np.median(res ** 2, axis=0)
+        res = normals[start:start + chunk] @ pts_t  # (chunk, N): medians along contiguous rows
+        res += offsets[start:start + chunk, None]
+        med = np.median(np.square(res, out=res), axis=1)
         j = int(np.argmin(med))
         if med[j] < best_med:
             best_med, best = float(med[j]), start + j

@@ -90,9 +90,11 @@ def relative_transform(T_vehicle_target: np.ndarray, T_vehicle_source: np.ndarra
 
 def load_sequence(camera_npz: str | Path, *, scene_dir: str | Path | None = None, stereo_npz: str | Path | None = None,
                   reversed_order: bool = False, camera: str = "cam_front", stereo_camera: str = "cam_front_right",
-                  name: str | None = None) -> Sequence:
+                  name: str | None = None, stereo_baseline: float | None = None) -> Sequence:
     """A ``Sequence`` from a prepared camera file; ``scene_dir`` (the raw scene) supplies the ego poses and,
-    with ``stereo_npz``, the stereo extrinsics."""
+    with ``stereo_npz``, the stereo extrinsics. ``stereo_baseline`` rescales the stereo translation to that
+    length in network units (Monodepth2 trains with 0.1 and multiplies by 5.4 = 0.54 m / 0.1 at evaluation);
+    the metric baseline is kept in ``extra["stereo_baseline_m"]``."""
     images, K = read_prepared(camera_npz)
     seq = Sequence(name or str(Path(camera_npz).parent.name), images, K, reversed=reversed_order, camera=camera)
     if scene_dir is not None:
@@ -113,6 +115,10 @@ def load_sequence(camera_npz: str | Path, *, scene_dir: str | Path | None = None
         extr = json.loads((Path(scene_dir) / "extrinsics.json").read_text())
         seq.stereo = s_images
         seq.stereo_T = relative_transform(np.array(extr[camera]), np.array(extr[stereo_camera]))
+        metric = float(np.linalg.norm(seq.stereo_T[:3, 3]))
+        seq.extra["stereo_baseline_m"] = metric
+        if stereo_baseline is not None and metric > 0:
+            seq.stereo_T[:3, 3] *= float(stereo_baseline) / metric
     return seq
 
 

@@ -22,21 +22,31 @@ def _pool3(x: torch.Tensor) -> torch.Tensor:
     return (r[..., :-2, :] + r[..., 1:-1, :] + r[..., 2:, :]) / 9.0
 
 
-def ssim(x: torch.Tensor, y: torch.Tensor, c1: float = C1, c2: float = C2) -> torch.Tensor:
-    """Per-pixel, per-channel SSIM (B, C, H, W) over 3x3 windows, reflection padded (Monodepth2's SSIM)."""
-    mu_x, mu_y = _pool3(x), _pool3(y)
+def ssim_stats(y: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """3x3 local mean and variance of ``y`` (reusable when one target meets many predictions)."""
+    mu_y = _pool3(y)
+    return mu_y, _pool3(y * y) - mu_y ** 2
+
+
+def ssim(x: torch.Tensor, y: torch.Tensor, c1: float = C1, c2: float = C2,
+         y_stats: tuple[torch.Tensor, torch.Tensor] | None = None) -> torch.Tensor:
+    """Per-pixel, per-channel SSIM (B, C, H, W) over 3x3 windows, reflection padded (Monodepth2's SSIM).
+    ``y_stats`` = ``ssim_stats(y)`` when already computed."""
+    mu_x = _pool3(x)
+    mu_y, sigma_y = y_stats if y_stats is not None else ssim_stats(y)
     sigma_x = _pool3(x * x) - mu_x ** 2
-    sigma_y = _pool3(y * y) - mu_y ** 2
     sigma_xy = _pool3(x * y) - mu_x * mu_y
     num = (2 * mu_x * mu_y + c1) * (2 * sigma_xy + c2)
     den = (mu_x ** 2 + mu_y ** 2 + c1) * (sigma_x + sigma_y + c2)
     return num / den
 
 
-def photometric_error(pred: torch.Tensor, target: torch.Tensor, alpha: float = 0.85) -> torch.Tensor:
-    """P = alpha (1 - SSIM) / 2 + (1 - alpha) |pred - target|, averaged over channels: (B, 1, H, W)."""
+def photometric_error(pred: torch.Tensor, target: torch.Tensor, alpha: float = 0.85,
+                      target_stats: tuple[torch.Tensor, torch.Tensor] | None = None) -> torch.Tensor:
+    """P = alpha (1 - SSIM) / 2 + (1 - alpha) |pred - target|, averaged over channels: (B, 1, H, W).
+    ``target_stats`` = ``ssim_stats(target)`` when already computed."""
     l1 = (pred - target).abs().mean(1, keepdim=True)
-    dssim = ((1.0 - ssim(pred, target)) / 2.0).clamp(0.0, 1.0).mean(1, keepdim=True)
+    dssim = ((1.0 - ssim(pred, target, y_stats=target_stats)) / 2.0).clamp(0.0, 1.0).mean(1, keepdim=True)
     return alpha * dssim + (1.0 - alpha) * l1
 
 
@@ -101,12 +111,13 @@ def self_supervised_loss(target: torch.Tensor, warped: torch.Tensor | Sequence[S
 
     # One photometric-error call per (scale, source): the chunks stay in the CPU caches (one call on the whole
     # (S*N*B, 3, H, W) stack is several times slower on CPU for the same arithmetic).
-    reproj = torch.stack([torch.cat([photometric_error(warped_t[s, k], target, alpha) for k in range(n_src)], 1)
+    stats = ssim_stats(target)
+    reproj = torch.stack([torch.cat([photometric_error(warped_t[s, k], target, alpha, stats) for k in range(n_src)], 1)
                           for s in range(n_scales)])  # (S, B, N, H, W)
     min_err = min_reprojection(reproj.reshape(n_scales * b, n_src, h, w))  # (S*B, 1, H, W)
     if automasking:
         with torch.no_grad():  # the sources are inputs: no gradient flows through the identity errors
-            ident = torch.cat([photometric_error(identity_t[k], target, alpha) for k in range(n_src)], 1)
+            ident = torch.cat([photometric_error(identity_t[k], target, alpha, stats) for k in range(n_src)], 1)
         ident = ident.repeat(n_scales, 1, 1, 1)  # (S*B, N, H, W)
         mask = automask(min_err, ident, noise_std, generator).to(min_err.dtype)
     else:

@@ -36,6 +36,11 @@ def train(models: Mapping[str, nn.Module], seqs: Seq[data.Sequence], sources: Se
     plus ``lr``). Returns a summary (samples, dropped frames, steps, seconds, images per second, last loss)."""
     loss_kwargs = dict(loss_kwargs or {})
     samples, dropped = data.training_samples(seqs, sources, min_speed)
+    static_fallback = False
+    if not samples and dropped["static"] > 0:  # every complete sample is static: train on them, say so
+        samples, dropped = data.training_samples(seqs, sources, 0.0)
+        static_fallback = True
+        print(f"warning: every training frame is static (ego speed < {min_speed} m/s); training on them anyway")
     if not samples:
         raise ValueError(f"no complete training sample for sources {list(sources)} "
                          f"({dropped['missing_source']} frames miss a source, {dropped['static']} are static)")
@@ -49,7 +54,7 @@ def train(models: Mapping[str, nn.Module], seqs: Seq[data.Sequence], sources: Se
         m.train()
     start = time.perf_counter()
     last: dict = {}
-    for step, idx in enumerate(batches(len(samples), batch_size, steps), start=1):
+    for step, idx in enumerate(batches(len(samples), batch_size, steps, rng), start=1):
         if step == decay_step + 1 and decay_step > 0:
             for group in optimizer.param_groups:
                 group["lr"] = lr * gamma
@@ -70,7 +75,7 @@ def train(models: Mapping[str, nn.Module], seqs: Seq[data.Sequence], sources: Se
     return {"samples": len(samples), "dropped_missing_source": dropped["missing_source"],
             "dropped_static": dropped["static"], "steps": steps, "batch_size": batch_size,
             "train_seconds": seconds, "images_per_second": steps * batch_size / max(seconds, 1e-9),
-            "final_loss": float(last.get("loss", float("nan")))}
+            "final_loss": float(last.get("loss", float("nan"))), "static_fallback": int(static_fallback)}
 
 
 def _to(batch: dict, device) -> dict:

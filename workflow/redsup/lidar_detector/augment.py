@@ -15,7 +15,7 @@ import numpy as np
 
 @dataclass(frozen=True)
 class AugmentSpec:
-    rotation: float = math.pi / 4            # max |angle| (rad), uniform
+    rotation: float = math.pi / 18           # max |angle| (rad), uniform
     flip: bool = True                        # left-right flip with probability 1/2
     scale: tuple[float, float] = (0.95, 1.05)
     translation_std: tuple[float, float, float] = (0.2, 0.2, 0.2)   # m

@@ -5,8 +5,9 @@ Pillars are infinite-height voxels of `pillar` metres in x (forward) and y (left
 `stride`, so the output map (heatmap, offsets, yaw bins) has cells of `pillar * stride` metres:
 the thesis uses 10 cm voxels and 4x downsampling (40 cm cells, 200 x 176 over 80 x 70.4 m); our CPU
 default is 20 cm pillars and 2x downsampling (the same 40 cm cells) over x in [0, 51.2) and y in
-[-16, 16), i.e. 256 x 160 pillars and a 128 x 80 output map: the world's streets lie within |y| < 16 m
-(facades beyond), and with 2D boxes in KITTI pixels the moderate / hard cut (25 px) ends near 45 m.
+[-12.8, 12.8), i.e. 256 x 128 pillars and a 128 x 64 output map: the world's street cars (parked and
+moving) lie within |y| < 9 m, and with 2D boxes in KITTI pixels the moderate / hard cut (25 px) ends
+near 45 m.
 
 Output cell (r, c) covers x in [x_min + c cell, x_min + (c + 1) cell), y in [y_min + r cell, ...), rows
 along y, columns along x, as `redsup.det3d.voting.BevGrid`.
@@ -22,7 +23,7 @@ from redsup.det3d.voting import BevGrid
 @dataclass(frozen=True)
 class GridSpec:
     x_range: tuple[float, float] = (0.0, 51.2)
-    y_range: tuple[float, float] = (-16.0, 16.0)
+    y_range: tuple[float, float] = (-12.8, 12.8)
     z_range: tuple[float, float] = (-1.0, 4.0)
     pillar: float = 0.2
     stride: int = 2

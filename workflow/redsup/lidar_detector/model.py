@@ -3,9 +3,10 @@
 - `PillarNet` (PointPillars' PFN): per point (x, y, z)/10 m, reflectance, offsets to the mean of its
   pillar's points and to the pillar centre -> Linear + BatchNorm + ReLU -> max over the pillar, scattered
   into a (C, ny, nx) canvas (empty pillars 0).
-- `Backbone`: a stride-`grid.stride` stem (stride-2 convolutions), two 3x3 convolutions at the output resolution, a branch at
-  half that resolution (two 3x3 convolutions) upsampled back and concatenated, a fusing 3x3 convolution.
-  Any grid size works (the branch is resized to the exact output size).
+- `Backbone`: a stride-`grid.stride` stem (stride-2 3x3 convolutions) and a 3x3 convolution at the output
+  resolution, plus a branch at half that resolution (three 3x3 convolutions, wider, for the receptive field
+  of a whole car) projected by a 1x1 convolution, upsampled (nearest) and added. Any grid size works (the
+  branch is resized to the exact output size).
 - Heads on a shared 3x3 convolution: `heatmap` (B, 1, H, W) logits (bias -2.19: prior 0.1, CenterNet),
   `offset` (B, 3, H, W) metres from the cell corner (x_min + c cell, y_min + r cell, z_ref) to the object
   centre (bias: cell centre and a car's centre height), `yaw` (B, K, H, W) bin logits, and with
@@ -83,23 +84,22 @@ class Backbone(nn.Module):
             self.stem = nn.Sequential(*[_conv(cin if i == 0 else channels, channels, 2) for i in range(k)])
         else:
             self.stem = _conv(cin, channels, stride)
-        self.block = nn.Sequential(_conv(channels, channels), _conv(channels, channels))
-        self.down = nn.Sequential(_conv(channels, deep_channels, 2), _conv(deep_channels, deep_channels))
-        self.up = _conv(deep_channels, channels)
-        self.fuse = _conv(2 * channels, channels)
+        self.block = _conv(channels, channels)
+        self.down = nn.Sequential(_conv(channels, deep_channels, 2), _conv(deep_channels, deep_channels),
+                                  _conv(deep_channels, deep_channels))
+        self.up = nn.Sequential(nn.Conv2d(deep_channels, channels, 1, bias=False), nn.BatchNorm2d(channels))
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
         f1 = self.block(self.stem(x))
-        f2 = self.down(f1)
-        up = self.up(F.interpolate(f2, size=f1.shape[-2:], mode="nearest"))
-        return self.fuse(torch.cat([f1, up], dim=1))
+        up = F.interpolate(self.up(self.down(f1)), size=f1.shape[-2:], mode="nearest")
+        return F.relu(f1 + up)
 
 
 class CenterDetector(nn.Module):
     """outputs = model(list of (N_b, 4) point tensors) -> dict of (B, ., H, W) maps."""
 
-    def __init__(self, grid: GridSpec, n_bins: int = 64, predict_size: bool = False, pillar_channels: int = 16,
-                 channels: int = 32, deep_channels: int = 64, centre_height: float = 0.75):
+    def __init__(self, grid: GridSpec, n_bins: int = 64, predict_size: bool = False, pillar_channels: int = 8,
+                 channels: int = 24, deep_channels: int = 48, centre_height: float = 0.75):
         super().__init__()
         self.grid = grid
         self.n_bins = n_bins

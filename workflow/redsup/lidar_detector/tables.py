@@ -9,6 +9,7 @@ R40") and IoU 0.5, ours only.
 from __future__ import annotations
 
 import math
+import re
 
 import pandas as pd
 
@@ -17,6 +18,11 @@ from redsup.det3d.kitti_eval import DIFFICULTIES
 # the thesis' column names per table (Table 1 says "Moderate", Tables 2-3 "Medium")
 MODERATE_NAME = {"mccraith_ch7_table1": "Moderate", "mccraith_ch7_table2": "Medium", "mccraith_ch7_table3": "Medium"}
 CH6_ROW = "McCraith et al. [2022] †"
+
+
+def metric_name(name: str) -> str:
+    """An MLflow-safe metric name (alphanumerics, _ - . space : /; everything else -> _)."""
+    return re.sub(r"[^A-Za-z0-9_\-. :/]", "_", name)
 
 
 def metric_key(difficulty: str, iou: float = 0.7, recall: str = "R40", metric: str = "bev") -> str:

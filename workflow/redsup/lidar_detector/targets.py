@@ -7,6 +7,13 @@ the (2w+1)^2 cells around it are evaluated with the alignment loss against L_m
 cell whose offset is trained by the template alignment and whose yaw logits get the best-bin target.
 Masks whose median falls outside the grid are skipped (counted).
 
+What "the loss of a cell's prediction" is (`vote_yaw`): "predicted" evaluates the alignment loss at the
+cell's own arg-max yaw (`voting.vote`, yaw_mode "predicted"); "best" at the best of the K bins at the
+cell's centre (eq. 8; `voting.vote`, yaw_mode "best"); "loss" the whole per-object loss of eq. (9) for
+that cell: alignment at the best bin + the cross-entropy of the cell's yaw logits to that bin
+(`vote_eq9`). "best" and "loss" evaluate every bin of every candidate cell, on a random subset of at most
+`vote_points` points of each L_m.
+
 Heatmap targets are CenterNet Gaussians, max-merged, peak exactly 1 at the object's cell, radius from
 the object's BEV size in cells (`gaussian_radius`, min_overlap 0.1, at least `min_radius` cells, as
 CenterPoint); weak objects use the template size.
@@ -20,10 +27,12 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from redsup.det3d.losses import yaw_to_bin
+import torch.nn.functional as F
+
+from redsup.det3d.losses import masked_mean, yaw_bin_centers, yaw_to_bin
 from redsup.det3d.pointsets import pad_point_sets
-from redsup.det3d.template import Template
-from redsup.det3d.voting import BevGrid, VoteResult, median_cell, vote
+from redsup.det3d.template import Template, distance_to_template
+from redsup.det3d.voting import BevGrid, VoteResult, median_cell, vote, window_offsets
 
 
 @dataclass
@@ -58,16 +67,69 @@ class WeakAssignment:
     vote: VoteResult
 
 
+def _subsample(points: torch.Tensor, mask: torch.Tensor, k: int | None, generator: torch.Generator | None):
+    """At most k real points per padded set (random without replacement, deterministic for a seeded
+    generator); returns (points (N, k', 3), mask (N, k'))."""
+    if k is None or points.shape[1] <= k:
+        return points, mask
+    keys = torch.rand(mask.shape, generator=generator, device=mask.device) if generator is not None \
+        else torch.rand(mask.shape, device=mask.device)
+    keys = torch.where(mask, keys, torch.full_like(keys, 2.0))           # padding sorts last
+    idx = keys.argsort(dim=1)[:, :k]
+    return torch.gather(points, 1, idx[..., None].expand(-1, -1, 3)), torch.gather(mask, 1, idx)
+
+
+def vote_eq9(grid: BevGrid, offsets: torch.Tensor, yaw_logits: torch.Tensor, points: torch.Tensor,
+             mask: torch.Tensor | None, cells: torch.Tensor, frame_index: torch.Tensor, window: int,
+             loss_fn: Callable[[torch.Tensor], torch.Tensor], template: Template) -> VoteResult:
+    """Multi-cell voting with the per-object loss of ch. 7 eq. (9) as the cell's score: alignment at the
+    cell's best yaw bin (eq. 8) + cross-entropy of its yaw logits to that bin. Same arguments and result
+    as `voting.vote` (yaw = the best bin's yaw); ties go to the first cell in row-major order."""
+    with torch.no_grad():
+        n, n_bins = points.shape[0], yaw_logits.shape[1]
+        win = window_offsets(window, device=points.device)
+        cand = cells[:, None, :] + win[None]                                      # (N, C, 2)
+        rows, cols = cand[..., 0], cand[..., 1]
+        inside = (rows >= 0) & (rows < grid.height) & (cols >= 0) & (cols < grid.width) \
+            & (cells[:, None, 0] >= 0)
+        r, c = rows.clamp(0, grid.height - 1), cols.clamp(0, grid.width - 1)
+        f = frame_index[:, None].expand_as(r)
+        centre = grid.decode(r, c, offsets.permute(0, 2, 3, 1)[f, r, c].to(points.dtype))     # (N, C, 3)
+        bins = yaw_bin_centers(n_bins, dtype=points.dtype, device=points.device)
+        d = distance_to_template(template, points[:, None, None], centre[:, :, None],
+                                 bins.expand(n, cand.shape[1], n_bins))          # (N, C, K, P)
+        per_bin = masked_mean(loss_fn(d), None if mask is None else mask[:, None, None, :])
+        align, best = per_bin.min(dim=-1)                                         # (N, C)
+        logp = F.log_softmax(yaw_logits.permute(0, 2, 3, 1)[f, r, c].to(points.dtype), dim=-1)   # (N, C, K)
+        loss = align - logp.gather(-1, best[..., None])[..., 0]
+        loss = torch.where(inside, loss, torch.full_like(loss, float("inf")))
+        k = loss.argmin(dim=1)
+        idx = torch.arange(n, device=points.device)
+        found = torch.isfinite(loss[idx, k])
+        cell = torch.where(found[:, None], cand[idx, k], torch.full_like(cand[idx, k], -1))
+        return VoteResult(cell, centre[idx, k], bins[best[idx, k]], loss[idx, k], cand, loss)
+
+
 def assign_weak(grid: BevGrid, outputs: dict[str, torch.Tensor], objs: WeakObjects, window: int,
                 loss_fn: Callable[[torch.Tensor], torch.Tensor], template: Template,
-                yaw_mode: str = "predicted") -> WeakAssignment:
+                yaw_mode: str = "predicted", vote_points: int | None = None,
+                generator: torch.Generator | None = None) -> WeakAssignment:
     """Median cell of each L_m, then multi-cell voting over the (2 window + 1)^2 neighbourhood using the
-    current predictions (no gradients)."""
+    current predictions (no gradients); `yaw_mode` "predicted" | "best" | "loss" (module docstring)."""
     pts = objs.points.to(outputs["offset"].device)
     mask = objs.mask.to(pts.device)
     med = median_cell(grid, pts, mask)
-    res = vote(grid, outputs["offset"].detach(), outputs["yaw"].detach(), pts, mask, med,
-               objs.frame.to(pts.device), window, loss_fn, template, yaw_mode=yaw_mode)
+    off, logits, frame = outputs["offset"].detach(), outputs["yaw"].detach(), objs.frame.to(pts.device)
+    if yaw_mode == "predicted":
+        res = vote(grid, off, logits, pts, mask, med, frame, window, loss_fn, template, yaw_mode="predicted")
+    elif yaw_mode in ("best", "loss"):
+        vp, vm = _subsample(pts, mask, vote_points, generator)
+        if yaw_mode == "best":
+            res = vote(grid, off, logits, vp, vm, med, frame, window, loss_fn, template, yaw_mode="best")
+        else:
+            res = vote_eq9(grid, off, logits, vp, vm, med, frame, window, loss_fn, template)
+    else:
+        raise ValueError(f"vote yaw mode must be 'predicted', 'best' or 'loss', got {yaw_mode!r}")
     valid = res.cell[:, 0] >= 0
     return WeakAssignment(res.cell, valid, med, res)
 

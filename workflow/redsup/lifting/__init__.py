@@ -14,6 +14,10 @@ Small modules, one job each:
 - `train`: the optimisation loop (Adam, step decay), loss curves, non-finite steps skipped and counted.
 - `postprocess`: network outputs -> vehicle-frame boxes with the fixed template size, scores = mask scores.
 - `evaluate`: predictions of a split -> KITTI AP (`redsup.det3d.kitti_eval`), flat metric dict.
-- `pipeline`: one configuration end to end (what the Snakemake script calls).
+- `pipeline`: one configuration end to end (what the Snakemake script calls), the auto-labels of Table IV.
 - `tables`: the chapter's four tables from the per-configuration metrics.
+- `plan`: the stage's jobs and their input files as data (used by `workflow/rules/lifting.smk`).
+
+Test time lifts every 2D detection of the test scenes (single frames, no search): box = the posed template's
+box with the FIXED template size 3.9 x 1.6 x 1.5 m (the method predicts no size), score = the mask score.
 """

@@ -21,7 +21,8 @@ Alignment terms, by the yaw head of the network:
                 (The thesis only names the two methods; these are their core mechanisms, not their code.)
 Multi-frame consistency, eq. (7)-(8): for pairs (i, j) of detections of one 3D track at most K frames apart,
     sum over the centre and front keypoints of ||g_{i<-j} X^j - X^i||^2, summed over pairs and divided by
-    the batch size (1/|D| sum_i sum_j). The yaw entering the keypoints is the head's differentiable yaw.
+    the batch size (1/|D| sum_i sum_j). The front keypoint uses the head's differentiable heading vector
+    (`MultiViewConsistency`).
 Supervised box (fully supervised reference rows, Table III (e), IV): smooth-L1 on the object-frame
     translation ("translation") + cross-entropy to the target's yaw bin ("yaw").
 """
@@ -32,10 +33,10 @@ from typing import Callable
 import torch
 import torch.nn.functional as F
 
-from redsup.det3d.losses import (best_yaw_bin, centre_front_keypoints, masked_mean, multiframe_consistency,
-                                 outlier_aware, squared_distance, yaw_bin_centers, yaw_to_bin)
+from redsup.det3d.losses import (best_yaw_bin, masked_mean, outlier_aware, squared_distance, yaw_bin_centers,
+                                 yaw_to_bin)
 from redsup.det3d.template import Template, distance_to_template
-from redsup.lifting.frames import to_vehicle
+from redsup.lifting.frames import rotate_z, to_vehicle
 
 
 # ------------------------------------------------------------------------------------ per-point losses
@@ -118,20 +119,37 @@ class AlignmentOverHypotheses:
 
 
 class MultiViewConsistency:
-    """Eq. (7)-(8) over the batch's frame pairs (centre and front keypoints of the template)."""
+    """Eq. (7)-(8) over the batch's frame pairs with the template's centre and front keypoints.
+
+    Keypoints of a prediction (vehicle frame of its frame): X_centre = t, X_front = t + (l / 2) d, with d the
+    head's heading vector rotated into the vehicle frame. For the bin head d is the expected unit vector
+    under the softmax (= the unit vector of the yaw for a confident head, as in `losses.posed_keypoints`),
+    which keeps the term smooth where the head hesitates between a heading and its reverse (an angle would
+    be undefined there and its gradient unbounded).
+    """
 
     def __init__(self, yaw_head, length: float):
         self.head = yaw_head
         self.length = float(length)
+
+    def keypoints(self, out: dict, batch) -> torch.Tensor:
+        """(B, 2, 3) centre and front keypoints in each object's vehicle frame."""
+        t = out["translation"]
+        d = self.head.direction(out)
+        d3 = torch.cat([d, torch.zeros_like(d[:, :1])], dim=-1)
+        centre, _ = to_vehicle(t, torch.zeros_like(t[:, 0]), batch.centre, batch.azimuth)
+        front = centre + (self.length / 2) * rotate_z(d3, batch.azimuth)
+        return torch.stack([centre, front], dim=1)
 
     def __call__(self, out: dict, batch) -> dict:
         t = out["translation"]
         if batch.pairs is None or len(batch.pairs[0]) == 0:
             return {"multiview": t.sum() * 0.0}
         i, j, T_i_from_j = batch.pairs
-        t_v, yaw_v = to_vehicle(t, self.head.soft_yaw(out), batch.centre, batch.azimuth)
-        kp = centre_front_keypoints(self.length, dtype=t.dtype, device=t.device)
-        per_kp = multiframe_consistency(t_v[i], yaw_v[i], t_v[j], yaw_v[j], T_i_from_j.to(t.dtype), kp)
+        kp = self.keypoints(out, batch)
+        T = T_i_from_j.to(t.dtype)
+        kp_j_in_i = kp[j] @ T[:, :3, :3].transpose(-1, -2) + T[:, None, :3, 3]
+        per_kp = ((kp_j_in_i - kp[i]) ** 2).sum(dim=-1)                       # (n, 2): ||g_{i<-j} X^j - X^i||^2
         return {"multiview": per_kp.sum() / t.shape[0]}
 
 

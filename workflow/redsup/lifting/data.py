@@ -104,6 +104,11 @@ class Batch:
     target_translation: torch.Tensor | None = None   # (B, 3) object frame
     target_yaw: torch.Tensor | None = None           # (B,) object frame
 
+    @property
+    def context(self) -> torch.Tensor:
+        """(B, 4) position features of the objects (`frames.context_features`)."""
+        return F.context_features(self.centre, self.azimuth)
+
 
 @dataclass
 class ObjectTable:
@@ -166,14 +171,22 @@ class ObjectTable:
             pose_a = np.stack([self.poses[s][f] for s, f in zip(self.scene[a], self.frame[a])])
             pose_b = np.stack([self.poses[s][f] for s, f in zip(self.scene[b], self.frame[b])])
             T = np.linalg.solve(pose_a, pose_b)            # inv(T_world_vehicle_i) T_world_vehicle_j
-        return (torch.as_tensor(i, dtype=torch.long), torch.as_tensor(j, dtype=torch.long),
-                torch.as_tensor(T, dtype=self.points.dtype))
+        dev = self.points.device
+        return (torch.as_tensor(i, dtype=torch.long, device=dev), torch.as_tensor(j, dtype=torch.long, device=dev),
+                torch.as_tensor(T, dtype=self.points.dtype, device=dev))
+
+    def to(self, device) -> "ObjectTable":
+        """The same table with its tensors on `device` (the bookkeeping arrays stay numpy)."""
+        moved = {k: (v.to(device) if isinstance(v, torch.Tensor) else v) for k, v in self.__dict__.items()}
+        return ObjectTable(**moved)
 
     def batch(self, idx: np.ndarray, span: int | None = None) -> Batch:
+        """The objects idx, cut to the widest real point set among them; pairs of eq. (7) if span is given."""
         idx = np.asarray(idx, dtype=np.int64)
-        width = max(1, int(self.mask[idx].sum(dim=1).max())) if len(idx) else 1
-        t = torch.as_tensor(idx)
-        return Batch(points=self.points[t, :width], mask=self.mask[t, :width], centre=self.centre[t],
+        t = torch.as_tensor(idx, device=self.points.device)
+        mask = self.mask[t]
+        width = max(1, int(mask.sum(dim=1).max())) if len(idx) else 1
+        return Batch(points=self.points[t, :width], mask=mask[:, :width], centre=self.centre[t],
                      azimuth=self.azimuth[t], pairs=None if span is None else self.pairs(idx, span),
                      target_translation=None if self.target_translation is None else self.target_translation[t],
                      target_yaw=None if self.target_yaw is None else self.target_yaw[t])

@@ -5,7 +5,8 @@ ground truth and detections are scaled to KITTI-camera pixels (`redsup.det3d.kit
 easy / moderate / hard height cuts mean what they mean on KITTI. Detections that could not be lifted
 (no or too few LiDAR points) are simply absent (a miss if they were a car).
 
-Returns `kitti_eval.evaluate`'s flat dict, e.g. `Car_bev_0.5/moderate_R40`, `Car_3d_0.7/easy_R11`.
+Returns `kitti_eval.evaluate`'s flat dict, e.g. `Car_bev_0.5/moderate_R40`, `Car_3d_0.7/easy_R11`, plus
+`n_gt/easy` ... (valid ground-truth cars per difficulty, named as the chapter-7 stage names them).
 """
 from __future__ import annotations
 
@@ -34,10 +35,17 @@ def split_frames(scene_dirs: list[str | Path], table: ObjectTable, boxes: np.nda
     return gts, dets
 
 
+def evaluate_frames(gts: list, dets: list, iou_thresholds=(0.7, 0.5)) -> dict[str, float]:
+    """AP_BEV and AP_3D (R11, R40) at the thresholds, plus `n_gt/<difficulty>` (valid cars)."""
+    metrics = evaluate(gts, dets, metrics=("bev", "3d"), iou_thresholds={"Car": tuple(iou_thresholds)})
+    metrics.update({k: float(v) for k, v in valid_gt_counts(gts).items()})
+    return metrics
+
+
 def evaluate_split(scene_dirs, table: ObjectTable, boxes: np.ndarray, camera: str = "cam_front",
                    iou_thresholds=(0.7, 0.5), reference_focal: float | None = None) -> dict[str, float]:
     gts, dets = split_frames(scene_dirs, table, boxes, camera, reference_focal)
-    return evaluate(gts, dets, metrics=("bev", "3d"), iou_thresholds={"Car": tuple(iou_thresholds)})
+    return evaluate_frames(gts, dets, iou_thresholds)
 
 
 def valid_gt_counts(gts: list) -> dict[str, int]:

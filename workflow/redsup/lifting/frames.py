@@ -8,7 +8,8 @@ translation and yaw in this frame; `to_vehicle` maps them back:
     p_local = R(-phi) (p - c),     t_vehicle = c + R(phi) t_local,     yaw_vehicle = yaw_local + phi.
 
 Yaw bins (`redsup.det3d.losses.yaw_bin_centers`) therefore quantise the yaw relative to the viewing ray (the
-KITTI observation angle), which is what a partial scan determines.
+KITTI observation angle), which is what a partial scan determines. The normalisation hides where the object
+is; `context_features` gives it back to the network's heads (azimuth, range, height) when configured.
 """
 from __future__ import annotations
 
@@ -56,6 +57,13 @@ def to_vehicle(translation_local, yaw_local, centre, azimuth):
 def pose_to_local(translation, yaw, centre, azimuth):
     """Vehicle-frame poses -> object frames (targets of the supervised rows)."""
     return rotate_z(translation - centre, -azimuth), yaw - azimuth
+
+
+def context_features(centre: torch.Tensor, azimuth: torch.Tensor) -> torch.Tensor:
+    """(B, 4) where the object is, which the object frame hides: cos / sin of the viewing azimuth, range / 40 m,
+    height of the pseudo-centre (the network's optional position input, `lifting.network.position_input`)."""
+    rng = torch.linalg.vector_norm(centre[..., :2], dim=-1)
+    return torch.stack([torch.cos(azimuth), torch.sin(azimuth), rng / 40.0, centre[..., 2]], dim=-1)
 
 
 def wrap_angle(a):

@@ -16,6 +16,7 @@ Test time is the same for every configuration: every detection of the test scene
 """
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 
@@ -25,7 +26,7 @@ import torch
 from redsup.det3d.template import TemplateSpec, build_template
 from redsup.lifting import data as D
 from redsup.lifting.criterion import build_criterion
-from redsup.lifting.evaluate import evaluate_split, split_frames, valid_gt_counts
+from redsup.lifting.evaluate import evaluate_frames, split_frames
 from redsup.lifting.frames import wrap_angle
 from redsup.lifting.gt_objects import gt_car_boxes, matched_targets, unmatched_gt_objects
 from redsup.lifting.model import build_model
@@ -35,6 +36,40 @@ from redsup.lifting.train import train
 TARGETS = ("none", "gt_all", "gt_matched", "labels")
 
 
+def resolve_device(name: str = "cpu") -> torch.device:
+    """cpu | cuda | auto (cuda when available)."""
+    if name == "auto":
+        name = "cuda" if torch.cuda.is_available() else "cpu"
+    return torch.device(name)
+
+
+def scene_inputs(scene_dirs, detections, tracks=None) -> list[D.SceneInput]:
+    """SceneInput per scene from the parallel file lists of a Snakemake rule."""
+    scene_dirs, detections = list(scene_dirs), list(detections)
+    tracks = list(tracks) if tracks is not None else [None] * len(scene_dirs)
+    if not len(scene_dirs) == len(detections) == len(tracks):
+        raise ValueError(f"{len(scene_dirs)} scenes, {len(detections)} detection files, {len(tracks)} track files")
+    return [D.SceneInput(str(s), str(d), None if t is None else str(t))
+            for s, d, t in zip(scene_dirs, detections, tracks)]
+
+
+def save_model(model: torch.nn.Module, spec: dict, cfg: dict, path: str | Path) -> None:
+    """State dict + what rebuilds the network, written to a temporary name and renamed."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".part")
+    state = {k: v.detach().cpu() for k, v in model.state_dict().items()}
+    torch.save({"state_dict": state, "yaw": dict(spec["yaw"]), "network": dict(cfg["network"])}, tmp)
+    os.replace(tmp, path)
+
+
+def load_model(path: str | Path, device: str | torch.device = "cpu") -> torch.nn.Module:
+    ckpt = torch.load(path, map_location="cpu", weights_only=True)
+    model = build_model(ckpt["network"], ckpt["yaw"])
+    model.load_state_dict(ckpt["state_dict"])
+    return model.to(device).eval()
+
+
 def make_template(cfg: dict):
     """The fixed template car (`lifting.template`: distance-field voxel and margin; default car size)."""
     t = cfg["template"]
@@ -42,7 +77,7 @@ def make_template(cfg: dict):
 
 
 def read_labels(path: str | Path) -> dict[str, dict[int, np.ndarray]]:
-    """scene name -> {detection row: (7,) box} from a labels npz (`write_labels`)."""
+    """scene name -> {detection row: (7,) box} from a labels npz (`make_labels`)."""
     with np.load(path, allow_pickle=False) as z:
         scene, det, box = z["scene"], z["detection"], z["box"]
     out: dict[str, dict[int, np.ndarray]] = {}
@@ -92,8 +127,8 @@ def diagnostics(scenes: list[D.SceneInput], table: D.ObjectTable, boxes: np.ndar
     """Evaluation-only error statistics of the lifted boxes on detections matched to a ground-truth car."""
     errs, yaw_errs = [], []
     for k, scene in enumerate(scenes):
-        det = np.load(scene.detections)
-        matched = det["matched_track"]
+        with np.load(scene.detections) as det:
+            matched = det["matched_track"]
         gt = gt_car_boxes(scene.scene_dir)
         sel = np.flatnonzero(table.scene == k)
         target = matched_targets(table.frame[sel], matched[table.detection[sel]], gt)
@@ -115,35 +150,40 @@ def run_configuration(spec: dict, cfg: dict, train_scenes: list[D.SceneInput], t
                       min_depth: float = 0.1) -> tuple[torch.nn.Module, dict, dict]:
     """Train one configuration and evaluate it. Returns (model, KITTI metrics, info for the run record)."""
     start = time.perf_counter()
-    template = make_template(cfg)
+    device = resolve_device(cfg.get("device", "cpu"))
+    template = make_template(cfg).to(device=device)
     labels = read_labels(labels_path) if labels_path else None
     raws = training_raws(spec, train_scenes, labels, camera=camera, min_depth=min_depth)
     table = load_table(raws, train_scenes, cfg, int(cfg["train"]["min_points"]), float(cfg["train"]["min_score"]),
                        seed)
     print("training objects:", table.message())
+    if spec["targets"] == "none" and "supervised_box" in spec["terms"]:
+        raise ValueError("terms: supervised_box needs box targets (targets: gt_all | gt_matched | labels)")
+    table = table.to(device)
     torch.manual_seed(seed)
-    model = build_model(cfg["network"], spec["yaw"])
+    model = build_model(cfg["network"], spec["yaw"]).to(device)
     criterion = build_criterion(spec, cfg["loss"], template, model.yaw)
     train_cfg = {**cfg["train"], "span": cfg["loss"]["multiview_span"]}
     summary = train(model, criterion, table, train_cfg, seed, log=log)
-    train_s = time.perf_counter() - start
-    test = test_table(spec, test_scenes, cfg, seed)
+    train_s, train_cpu = time.perf_counter() - start, time.process_time()
+    test = test_table(spec, test_scenes, cfg, seed).to(device)
     print("test objects:", test.message())
     boxes = predict_boxes(model, test, template.size)
     scene_dirs = [s.scene_dir for s in test_scenes]
-    metrics = evaluate_split(scene_dirs, test, boxes, camera=camera, iou_thresholds=cfg["eval"]["iou"])
-    gts, _ = split_frames(scene_dirs, test, boxes, camera=camera)
-    info = {"train_objects": len(table), "train_pairs_tracks": int((table.track >= 0).sum()),
+    gts, dets = split_frames(scene_dirs, test, boxes, camera=camera)
+    metrics = evaluate_frames(gts, dets, cfg["eval"]["iou"])
+    info = {"train_objects": len(table), "train_tracked_objects": int((table.track >= 0).sum()),
             "train_steps": summary["steps"], "train_skipped_nonfinite_steps": summary["skipped_nonfinite"],
-            "train_seconds": train_s, "test_objects": len(test),
+            "train_seconds": train_s, "process_cpu_seconds_after_training": train_cpu,
+            "process_cpu_seconds": time.process_time(), "test_objects": len(test),
             **{f"train_bad_input/{k}": v for k, v in table.counts.items()},
             **{f"test_bad_input/{k}": v for k, v in test.counts.items()},
-            **valid_gt_counts(gts), **diagnostics(test_scenes, test, boxes),
+            **diagnostics(test_scenes, test, boxes),
             **{f"final/{k}": v for k, v in summary["final"].items()}}
     return model, metrics, info
 
 
-def write_labels(model: torch.nn.Module, spec: dict, cfg: dict, scenes: list[D.SceneInput], seed: int) -> dict:
+def make_labels(model: torch.nn.Module, spec: dict, cfg: dict, scenes: list[D.SceneInput], seed: int) -> dict:
     """Our automatically generated labels: the model's boxes for the training detections (Table IV (iii)).
 
     Returns the arrays of the labels npz: scene (names), detection (rows), box (N, 7), score.
@@ -151,6 +191,7 @@ def write_labels(model: torch.nn.Module, spec: dict, cfg: dict, scenes: list[D.S
     template = make_template(cfg)
     raws = [D.detection_objects(s, source=spec["points"])[0] for s in scenes]
     table = load_table(raws, scenes, cfg, int(cfg["train"]["min_points"]), float(cfg["train"]["min_score"]), seed)
+    table = table.to(next(model.parameters()).device)
     print("label objects:", table.message())
     boxes = predict_boxes(model, table, template.size)
     names = np.array([Path(scenes[k].scene_dir).name for k in table.scene], dtype=str)

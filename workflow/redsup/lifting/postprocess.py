@@ -24,11 +24,11 @@ def predict_boxes(model, table: ObjectTable, size, batch_size: int = 512) -> np.
     for s in range(0, len(table), batch_size):
         idx = np.arange(s, min(len(table), s + batch_size))
         b = table.batch(idx)
-        out = model(b.points, b.mask)
+        out = model(b.points, b.mask, b.context)
         t_v, yaw_v = to_vehicle(out["translation"], model.yaw.decode(out), b.centre, b.azimuth)
-        out_boxes[idx, :3] = t_v.double().numpy()
+        out_boxes[idx, :3] = t_v.double().cpu().numpy()
         out_boxes[idx, 3:6] = size
-        out_boxes[idx, 6] = wrap_angle(yaw_v.double()).numpy()
+        out_boxes[idx, 6] = wrap_angle(yaw_v.double()).cpu().numpy()
     return out_boxes
 
 

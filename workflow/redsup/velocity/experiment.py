@@ -2,6 +2,8 @@
 
 A configuration (config `velocity.configurations[i]`) is
 - `method: geometric`: eq. (1) and the last-frame derivative (no training);
+- `method: constant`: the mean velocity of the usable training vehicles for every vehicle (a reference row,
+  not in the thesis: the error of a predictor that uses no information from the boxes);
 - `method: mlp, train_on: tracker`: the MLP trained on the MedianFlow tracks of the training clips;
 - `method: mlp, train_on: synthetic`: the MLP trained only on generated tracks (`samples_factor` x
   `velocity.synthetic.samples` of them, velocities scaled by `velocity_scale`).
@@ -62,6 +64,19 @@ def run_geometric(splits: dict[str, TrackSet], fps: float, window: int,
     return metrics, predictions
 
 
+def run_constant(train: TrackSet, splits: dict[str, TrackSet]) -> tuple[dict, dict]:
+    """(metrics, predictions) of the constant predictor: the training vehicles' mean velocity."""
+    mean = train.velocity[train.usable].mean(axis=0) if train.usable.any() else np.zeros(2)
+    metrics = {"train_n": int(train.usable.sum()), "train_excluded": int((~train.usable).sum()),
+               "train_velocity_scale": 1.0}
+    predictions = {}
+    for split, tracks in splits.items():
+        v = np.tile(mean, (len(tracks), 1))
+        metrics.update(evaluate(split, tracks, v))
+        predictions[split] = {"velocity": v}
+    return metrics, predictions
+
+
 def training_tracks(configuration: dict, train: TrackSet, stats: dict | None, samples: int,
                     rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray, dict]:
     """(boxes (N, T, 4), targets (N, 2) [vx, vz], counts) the MLP of `configuration` is trained on."""
@@ -79,9 +94,14 @@ def training_tracks(configuration: dict, train: TrackSet, stats: dict | None, sa
     return gen["boxes"], gen["velocity"], {"train_n": n, "train_excluded": 0, "train_velocity_scale": scale}
 
 
+def epochs_of(configuration: dict, mlp_cfg: dict) -> int:
+    """Training epochs: `epochs_synthetic` for generated tracks, `epochs` for tracker boxes."""
+    return mlp_cfg["epochs_synthetic"] if configuration.get("train_on") == "synthetic" else mlp_cfg["epochs"]
+
+
 def run_mlp(configuration: dict, mlp_cfg: dict, sigma: float, samples: int, train: TrackSet,
             splits: dict[str, TrackSet], stats: dict | None, seed: int,
-            on_epoch=None) -> tuple[dict, dict, object, list[dict]]:
+            on_epoch=None, device: str = "cpu") -> tuple[dict, dict, object, list[dict]]:
     """(metrics, predictions, model, curve) of one MLP configuration: train, then evaluate every split.
     Features use each split's own calibration (synthetic tracks: the training clips' calibration)."""
     from redsup.velocity import mlp
@@ -90,12 +110,16 @@ def run_mlp(configuration: dict, mlp_cfg: dict, sigma: float, samples: int, trai
     boxes, targets, counts = training_tracks(configuration, train, stats, samples, rng)
     features = mlp.box_features(boxes, train.calib, sigma)
     eval_sets = {split: (mlp.box_features(t.boxes, t.calib, sigma), t.velocity) for split, t in splits.items()}
+    wall, cpu = time.perf_counter(), time.process_time()
     model, curve = mlp.train_mlp(features, targets, hidden=mlp_cfg["hidden"], layers=mlp_cfg["layers"],
                                  dropout=mlp_cfg["dropout"], lr=mlp_cfg["lr"], lr_decay=mlp_cfg["lr_decay"],
-                                 epochs=mlp_cfg["epochs"], batch_size=mlp_cfg["batch_size"], seed=seed,
-                                 eval_sets=eval_sets, on_epoch=on_epoch)
+                                 epochs=epochs_of(configuration, mlp_cfg), batch_size=mlp_cfg["batch_size"], seed=seed,
+                                 eval_sets=eval_sets, on_epoch=on_epoch, device=device)
     metrics = dict(counts)
+    metrics["train_seconds"] = time.perf_counter() - wall
+    metrics["train_cpu_seconds"] = time.process_time() - cpu
     metrics["train_loss_final"] = curve[-1]["train_loss"]
+    metrics["train_epochs"] = len(curve)
     predictions = {}
     for split, tracks in splits.items():
         v = mlp.predict(model, eval_sets[split][0]) if len(tracks) else np.zeros((0, 2))

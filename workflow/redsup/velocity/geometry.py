@@ -62,7 +62,7 @@ def read_calibration(split_dir: str | Path) -> Calibration:
         if len(nums) != 9 or len(height) != 1:
             raise SceneError(f"{path}: expected a 3x3 intrinsic matrix and one camera height")
         K = np.array(nums).reshape(3, 3)
-        calib = Calibration(K[0, 0], K[1, 1], K[0, 2], K[1, 2], height[0])
+        calib = Calibration(float(K[0, 0]), float(K[1, 1]), float(K[0, 2]), float(K[1, 2]), height[0])
     else:
         lines = [ln.split() for ln in text.splitlines() if ln.strip()]
         try:

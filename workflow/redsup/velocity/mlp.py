@@ -71,7 +71,8 @@ def velocity_loss(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
 def train_mlp(features: np.ndarray, targets: np.ndarray, *, hidden: int, layers: int, dropout: float, lr: float,
               lr_decay: float, epochs: int, batch_size: int, seed: int,
               eval_sets: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,
-              on_epoch: Callable[[int, dict], None] | None = None) -> tuple[VelocityMLP, list[dict]]:
+              on_epoch: Callable[[int, dict], None] | None = None,
+              device: str = "cpu") -> tuple[VelocityMLP, list[dict]]:
     """Train from scratch; returns the model (eval mode) and one dict per epoch: train_loss (mean
     ||V - Psi(b)||^2 over the epoch's batches, dropout on), lr, and `<name>_loss` for every eval set (dropout
     off; monitoring only, never used to select anything)."""
@@ -79,19 +80,21 @@ def train_mlp(features: np.ndarray, targets: np.ndarray, *, hidden: int, layers:
         raise ValueError("no training tracks")
     torch.manual_seed(seed)
     gen = torch.Generator().manual_seed(seed)
-    x = torch.as_tensor(features, dtype=torch.float32)
-    y = torch.as_tensor(targets, dtype=torch.float32)
+    x = torch.as_tensor(features, dtype=torch.float32, device=device)
+    y = torch.as_tensor(targets, dtype=torch.float32, device=device)
     model = VelocityMLP(x.shape[1], hidden, layers, dropout)
     model.set_normalisation(features)
+    model.to(device)
     opt = torch.optim.Adam(model.parameters(), lr=lr)
     sched = torch.optim.lr_scheduler.ExponentialLR(opt, gamma=lr_decay)
-    evals = {k: (torch.as_tensor(a, dtype=torch.float32), torch.as_tensor(b, dtype=torch.float32))
+    evals = {k: (torch.as_tensor(a, dtype=torch.float32, device=device),
+                 torch.as_tensor(b, dtype=torch.float32, device=device))
              for k, (a, b) in (eval_sets or {}).items() if len(a)}
     curve = []
     n = len(x)
     for epoch in range(epochs):
         model.train()
-        order = torch.randperm(n, generator=gen)
+        order = torch.randperm(n, generator=gen).to(device)
         total = 0.0
         for start in range(0, n, batch_size):
             idx = order[start:start + batch_size]
@@ -114,11 +117,23 @@ def train_mlp(features: np.ndarray, targets: np.ndarray, *, hidden: int, layers:
     return model, curve
 
 
+def model_device(model: nn.Module) -> torch.device:
+    return next(model.parameters()).device
+
+
+def resolve_device(name: str) -> str:
+    """cpu | cuda | auto (cuda when available)."""
+    if name == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    return name
+
+
 def predict(model: VelocityMLP, features: np.ndarray) -> np.ndarray:
     """(N, 2) velocity estimates [vx, vz] (eval mode, no gradients)."""
     model.eval()
     with torch.no_grad():
-        return model(torch.as_tensor(features, dtype=torch.float32)).numpy().astype(np.float64)
+        x = torch.as_tensor(features, dtype=torch.float32, device=model_device(model))
+        return model(x).cpu().numpy().astype(np.float64)
 
 
 def save_model(model: VelocityMLP, path, extra: dict | None = None) -> None:
@@ -126,7 +141,8 @@ def save_model(model: VelocityMLP, path, extra: dict | None = None) -> None:
     import os
 
     tmp = f"{path}.part"
-    torch.save({"config": model.config, "state_dict": model.state_dict(), **(extra or {})}, tmp)
+    state = {k: v.cpu() for k, v in model.state_dict().items()}
+    torch.save({"config": model.config, "state_dict": state, **(extra or {})}, tmp)
     os.replace(tmp, path)
 
 
@@ -140,14 +156,16 @@ def load_model(path) -> tuple[VelocityMLP, dict]:
 
 def forward_time_ms(model: VelocityMLP, boxes: np.ndarray, calib: Calibration, sigma: float,
                     repeats: int = 200) -> dict[str, float]:
-    """Time per track of the whole estimator Psi (smoothing, features, forward pass), one track at a time,
-    on the current torch threads: median and 90th percentile over `repeats` calls (after 10 warm-up calls)."""
+    """Time per track of the whole estimator Psi (smoothing, features, forward pass, result back on the
+    CPU), one track at a time, on the model's device and the current torch threads: median and 90th
+    percentile over `repeats` calls (after 10 warm-up calls)."""
     model.eval()
     track = np.asarray(boxes[:1], dtype=np.float64)
+    device = model_device(model)
 
     def once():
         with torch.no_grad():
-            model(torch.from_numpy(box_features(track, calib, sigma)))
+            model(torch.from_numpy(box_features(track, calib, sigma)).to(device)).cpu()
 
     for _ in range(10):
         once()

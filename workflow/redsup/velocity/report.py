@@ -60,8 +60,11 @@ def table_note(table_id: str, config: dict) -> str:
     parts.append(f"geometric velocity = slope of the least-squares line through the last {v['geometric']['window']} "
                  "eq. (1) ground points (the raw tracker boxes), times the frame rate")
     parts.append(f"MLPs: {v['mlp']['layers']} x {v['mlp']['hidden']} CReLU, dropout {v['mlp']['dropout']}, "
-                 f"{v['mlp']['epochs']} epochs, Gaussian sigma {v['smoothing_sigma']:g} on inputs at training and "
+                 f"{v['mlp']['epochs']} epochs on tracker boxes, {v['mlp']['epochs_synthetic']} on generated tracks, "
+                 f"batch {v['mlp']['batch_size']}, Gaussian sigma {v['smoothing_sigma']:g} on inputs at training and "
                  f"test time; synthetic tracks: {v['synthetic']['samples']} x samples_factor")
+    parts.append("constant = the training vehicles' mean velocity for every vehicle (ours, not in the thesis: "
+                 "the error of a predictor without information from the boxes)")
     if table_id == "mccraith_ch3_table2":
         parts.append("runtime = median time per track of the whole estimator, one track at a time, on one CPU "
                      "thread (the thesis' 10 ms is on a GPU); E_p (m^2) only where the method estimates a position "

@@ -119,7 +119,8 @@ def plot_fig3(values: dict[str, np.ndarray], calib: Calibration, stats: dict | N
     from redsup.velocity.synthetic import box_size
 
     Z = values["Z"]
-    z_line = np.linspace(max(float(Z.min()) * 0.9, 1.0) if len(Z) else 5.0, float(Z.max()) * 1.05 if len(Z) else 90.0, 200)
+    z_lo, z_hi = (max(float(Z.min()) * 0.9, 1.0), float(Z.max()) * 1.05) if len(Z) else (5.0, 90.0)
+    z_line = np.linspace(z_lo, z_hi, 200)
     fig, axes = plt.subplots(2, 2, figsize=(10, 7))
     titles = {"x": "left edge x (px)", "y": "top y (px)", "h": "box height h (px)", "w": "box width w (px)"}
     for ax, q in zip(axes.ravel(), ("x", "y", "h", "w")):

@@ -1,0 +1,190 @@
+"""The depth tables' configurations (rows, shared runs) and the evaluation runners on a hand-made sequence."""
+import copy
+import math
+
+import numpy as np
+import pytest
+import torch
+import yaml
+
+from redsup import config as config_mod
+from redsup.depth import configs, data, experiments, networks, reporting
+from redsup.depth.configs import EvalSpec, Row
+
+torch.set_num_threads(1)
+H, W = 32, 64
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    from pathlib import Path
+
+    raw = yaml.safe_load((Path(__file__).resolve().parents[1] / "config.yaml").read_text())
+    raw["profile"] = "default"
+    return config_mod.resolve(raw)
+
+
+def test_rows_of_every_table_at_default(cfg):
+    available, cameras = configs.availability(cfg)
+    rows = configs.table_rows(cfg["depth"], available, cameras)
+    assert set(rows) == set(configs.TABLES)
+    t1 = rows["mccraith_ch4_table1"]
+    assert len(t1) == 22 and t1[0].label == "baseline [9] (no instance adaptation)" and t1[0].step == 0
+    assert t1[1].label == "whole network"
+    assert "Depth Encoder (last residual block) + Pose Encoder (last residual block)" in [r.label for r in t1]
+    assert [r.label for r in rows["mccraith_ch4_table2"]][:3] == ["baseline", "10^-5", "10^-4"]
+    assert [r.label for r in rows["mccraith_ch4_table3"]][:3] == ["Initial", "5", "10"]
+    labels = {r.label for r in rows["mccraith_ch4_table5"]}
+    assert labels >= {"ours | M", "ours | S", "ours | MS", "Monodepth V2 [9] | S"}
+    assert [r.label for r in rows["mccraith_ch4_table7"]] == ["baseline | 0", "Ours | 20", "Ours | 50"]
+    assert len(rows["galteland_table5_1"]) == 9 and rows["galteland_table4_4"][1].label == "Front+Back"
+    models = configs.trained_models(cfg["depth"], {d: a["train"] for d, a in available.items()}, cameras)
+    assert set(models) == {"world_kitti/M", "world_kitti/S", "world_kitti/MS", "world_cityscapes/M", "world_lyft/M",
+                           "world_lyft/M_frontback", "world_ddad/M", "world_naplab/M"}
+
+
+def test_shared_runs(cfg):
+    rows = configs.table_rows(cfg["depth"], *configs.availability(cfg))
+    runs, row_runs = configs.plan(rows)
+    traj = row_runs["mccraith_ch4_table3"][0]
+    spec, parent = runs[traj]
+    assert parent == "mccraith_ch4_table3" and spec.groups == ("depth_encoder", "pose_encoder")
+    assert set(spec.checkpoints) == {0, 5, 10, 25, 50, 75, 100, 150, 200}
+    t1 = dict(zip([r.label for r in rows["mccraith_ch4_table1"]], row_runs["mccraith_ch4_table1"]))
+    assert t1["Depth Encoder + Pose Encoder"] == traj == t1["baseline [9] (no instance adaptation)"]
+    assert t1["Depth Decoder"] != traj
+    t2 = dict(zip([r.label for r in rows["mccraith_ch4_table2"]], row_runs["mccraith_ch4_table2"]))
+    assert t2["10^-1"] == traj and t2["baseline"] == traj
+    t6 = dict(zip([r.label for r in rows["mccraith_ch4_table6"]], row_runs["mccraith_ch4_table6"]))
+    assert t6["Eigen [16] | ours (instance-wise)"] == traj
+    assert runs[t6["Odometry | ours (sequence-wise)"]][0].kind == "sequential"
+    f5 = dict(zip([r.label for r in rows["mccraith_ch4_fig5"]], row_runs["mccraith_ch4_fig5"]))
+    assert f5["K | 50"] == t6["Odometry | ours (instance-wise)"]  # same lr and frames: one run
+    g = row_runs["galteland_table4_4"][0]
+    assert g in row_runs["galteland_table5_1"]  # Front only = Lyft | Lyft
+    # every run is used, names are unique and file-safe
+    used = {n for names in row_runs.values() for n in names}
+    assert used == set(runs) and all(" " not in n and "/" not in n for n in runs)
+
+
+def test_tables_shrink_with_missing_data(cfg):
+    depth = copy.deepcopy(cfg["depth"])
+    available, cameras = configs.availability(cfg)
+    available["world_ddad"] = {"train": 0, "test": 0, "long": 0}
+    available["world_kitti"]["long"] = 0
+    cameras["world_kitti"] = ["cam_front"]  # no stereo partner: no S / MS models
+    rows = configs.table_rows(depth, available, cameras)
+    assert not rows["mccraith_ch4_fig4"]
+    assert not any(r.label.startswith("Odometry") for r in rows["mccraith_ch4_table6"])
+    assert {r.label for r in rows["mccraith_ch4_table5"]} == {"ours | M", "Monodepth V2 [9] | M"}
+    assert len(rows["galteland_table5_1"]) == 4
+
+
+def test_labels():
+    assert configs.lr_label(1e-5) == "10^-5" and configs.lr_label(0.1) == "10^-1" and configs.lr_label(10.0) == "10"
+    assert configs.groups_label(("pose_encoder", "depth_encoder")) == "Depth Encoder + Pose Encoder"
+    assert configs.groups_label(()) == "baseline [9] (no instance adaptation)"
+
+
+# ------------------------------------------------------------------------------------------ runners
+def _eval_seq(n=4, empty_gt_frame=None):
+    rng = np.random.default_rng(1)
+    base = rng.integers(0, 255, size=(H, W + 8, 3), dtype=np.uint8)
+    images = np.stack([base[:, i:i + W] for i in range(n)])  # a sideways pan
+    K = np.array([[40.0, 0.0, 31.5], [0.0, 40.0, 15.5], [0.0, 0.0, 1.0]])
+    gt = np.zeros((n, 2 * H, 2 * W), np.float32)
+    gt[:, 40:60, 10:120] = np.linspace(5.0, 30.0, 110)[None, None]
+    if empty_gt_frame is not None:
+        gt[empty_gt_frame] = 0.0
+    return experiments.EvalSequence(data.Sequence("test_000", images, K), gt)
+
+
+@pytest.fixture(scope="module")
+def model():
+    torch.manual_seed(0)
+    models = networks.build_models(8).eval()
+    meta = {"min_depth": 0.1, "max_depth": 100.0, "sources": ["prev", "next"]}
+    return models, meta
+
+
+EVAL = {"min_depth": 1e-3, "max_depth": 80.0, "crop": "garg"}
+LOSS = {"noise_std": 0.0, "min_depth": 0.1, "max_depth": 100.0}
+
+
+def test_instance_run_checkpoints_and_bad_frames(model):
+    models, meta = model
+    before = {k: v.clone() for k, v in models.state_dict().items()}
+    seq = _eval_seq(4, empty_gt_frame=2)
+    frames = [(0, 0), (0, 1), (0, 2)]  # frame 0 has no previous frame, frame 2 no valid ground truth
+    records, curve = experiments.run_instance(models, meta, [seq], frames, sources=["prev", "next"],
+                                              groups=["depth_encoder", "pose_encoder"], lr=0.1, checkpoints=[0, 2],
+                                              eval_cfg=EVAL, loss_kwargs=LOSS, metric_scale=False)
+    assert all(torch.equal(before[k], v) for k, v in models.state_dict().items())  # reset afterwards
+    by = {(r["frame"], r["step"]): r for r in records}
+    assert "missing neighbour frame -1" in by[(0, 0)]["reason"] and "metrics" not in by[(0, 0)]
+    assert "no valid ground-truth pixel" in by[(2, 2)]["reason"]
+    assert by[(1, 0)]["metrics"]["abs_rel"] != by[(1, 2)]["metrics"]["abs_rel"]
+    assert by[(1, 2)]["seconds"] > by[(1, 0)]["seconds"] and len(curve) == 2
+    summary = experiments.summarise(records)
+    assert summary[2]["n_frames"] == 1 and summary[2]["n_skipped"] == 2 and len(summary[2]["skip_reasons"]) == 2
+    assert all(math.isfinite(v) for k, v in summary[2].items() if isinstance(v, float))
+
+
+def test_sequential_and_direct_runs(model):
+    models, meta = model
+    seq = _eval_seq(4)
+    recs, losses = experiments.run_sequential(models, meta, [seq], sources=["prev", "next"], groups=["depth_encoder"],
+                                              lr=0.1, steps=2, eval_cfg=EVAL, loss_kwargs=LOSS, metric_scale=False)
+    assert [("metrics" in r) for r in recs] == [False, True, True, False] and len(losses) == 4
+    inst, _ = experiments.run_instance(models, meta, [seq], [(0, 1)], sources=["prev", "next"],
+                                       groups=["depth_encoder"], lr=0.1, checkpoints=[2], eval_cfg=EVAL,
+                                       loss_kwargs=LOSS, metric_scale=False)
+    # the first adapted frame of a sequence starts from the trained weights, as instance-wise
+    assert recs[1]["metrics"]["abs_rel"] == pytest.approx(inst[0]["metrics"]["abs_rel"], rel=1e-4)
+    direct, curve = experiments.run_direct(models, meta, [seq], [(0, 1), (0, 3)], sources=["prev", "next"], lr=1.0,
+                                           steps=2, eval_cfg=EVAL, loss_kwargs=LOSS, metric_scale=False)
+    assert "metrics" in direct[0] and "missing neighbour" in direct[1]["reason"] and len(curve) == 2
+
+
+def test_prediction_only_needs_no_pair_and_resizing(model):
+    models, meta = model
+    seq = _eval_seq(3)
+    recs, _ = experiments.run_instance(models, meta, [seq], [(0, 0), (0, 2)], sources=(), groups=(), lr=0.0,
+                                       checkpoints=[0], eval_cfg=EVAL, loss_kwargs=LOSS, metric_scale=True)
+    assert all("metrics" in r for r in recs) and recs[0]["metrics"]["median_ratio"] == 1.0
+    depth = experiments.predict_sequence(models, seq.seq.images, meta)
+    assert depth.shape == (3, H, W) and depth.dtype == np.float32
+    up = experiments.resize_depth(np.full((H, W), 4.0, np.float32), (2 * H, 2 * W))
+    assert up.shape == (2 * H, 2 * W) and np.allclose(up, 4.0)
+
+
+def test_table_frame_averages_common_frames():
+    spec_a = EvalSpec("instance", "d/M", "d/test", "short", ("prev", "next"), ("depth_encoder",), 0.1, 0, (0, 5))
+    spec_b = EvalSpec("sequential", "d/M", "d/test", "all", ("prev", "next"), ("depth_encoder",), 0.1, 5)
+
+    def rec(frame, step, value=None, reason=None):
+        r = {"sequence": "s", "frame": frame, "step": step, "seconds": 0.5}
+        if value is None:
+            r["reason"] = reason
+        else:
+            r["metrics"] = {k: value for k in configs.METRIC_COLUMNS}
+        return r
+
+    res_a = {"records": [rec(1, 0, 0.2), rec(3, 0, 0.4), rec(1, 5, 0.1), rec(3, 5, 0.3)]}
+    res_b = {"records": [rec(0, 5, reason="missing neighbour"), rec(1, 5, 0.15), rec(2, 5, 0.9), rec(3, 5, 0.25)]}
+    rows = [Row("base", spec_a, 0, "g"), Row("inst", spec_a, 5, "g"), Row("seq", spec_b, 5, "g")]
+    df, info = reporting.table_frame("mccraith_ch4_table6", rows, [res_a, res_a, res_b])
+    assert df.loc["base", "Abs Rel"] == pytest.approx(0.3) and df.loc["seq", "Abs Rel"] == pytest.approx(0.2)
+    assert list(df["frames"]) == [2, 2, 2] and list(df["skipped"]) == [0, 0, 1]
+    assert df.loc["inst", "time [s]"] == pytest.approx(0.5) and info["groups"] == {"g": 2}
+    assert reporting.last_quarter(rows, [res_a, res_a, res_b]) == pytest.approx([0.4, 0.3, 0.25])
+
+
+def test_stereo_models_use_the_fixed_baseline_factor():
+    gt = np.zeros((16, 32), np.float32)
+    gt[10:14, 4:28] = 10.0
+    pred = np.full((16, 32), 2.0, np.float32)  # network units; x 5.4 (0.54 m / 0.1) = 10.8 m
+    stereo = experiments.evaluate_depth(gt, pred, EVAL, 5.4)
+    assert stereo.metrics["abs_rel"] == pytest.approx(0.08, rel=1e-4) and stereo.metrics["median_ratio"] == 1.0
+    mono = experiments.evaluate_depth(gt, pred, EVAL, False)
+    assert mono.metrics["abs_rel"] == pytest.approx(0.0, abs=1e-6) and mono.metrics["scale"] == pytest.approx(5.0)

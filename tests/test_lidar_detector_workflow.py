@@ -1,0 +1,64 @@
+"""The ch. 7 detector stage in the tiny build: cached splits, one trained configuration per row, the three
+tables with the thesis' values beside ours, and the run records."""
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+import yaml
+
+from redsup.config import resolve
+
+TABLES = ("mccraith_ch7_table1", "mccraith_ch7_table2", "mccraith_ch7_table3")
+
+
+@pytest.fixture(scope="module")
+def cfg():
+    raw = yaml.safe_load((Path(__file__).resolve().parents[1] / "config.yaml").read_text())
+    raw["profile"] = "tiny"
+    return resolve(raw)["lidar_detector"]
+
+
+def test_splits_are_cached_with_counts(built):
+    from redsup.lidar_detector.data import load_split
+
+    for split in ("train", "test"):
+        data = load_split(built / f"results/lidar_detector/data/{split}.npz")
+        assert data.n_frames > 0 and len(data.arrays["points"]) > 0
+        assert data.counts["masks_used"] > 0
+        assert np.isfinite(data.arrays["points"]).all() and np.isfinite(data.arrays["obj_points"]).all()
+        log = (built / f"results/logs/lidar_detector/data/{split}.log").read_text()
+        assert "skipped with no LiDAR point" in log
+
+
+def test_every_configuration_trained_once_with_curves(built, cfg):
+    for name in cfg["runs"]:
+        metrics = json.loads((built / f"results/lidar_detector/metrics/{name}.json").read_text())
+        assert metrics["train_steps"] == cfg["train"]["steps"] and metrics["train_steps_nonfinite"] == 0
+        for d in ("easy", "moderate", "hard"):
+            assert 0.0 <= metrics[f"Car_bev_0.7/{d}_R40"] <= 100.0 or math.isnan(metrics[f"Car_bev_0.7/{d}_R40"])
+        assert metrics["frames"] > 0 and metrics["infer_fps"] > 0
+        assert (built / f"results/lidar_detector/models/{name}.pt").stat().st_size > 0
+        record = json.loads((built / f"results/runs/lidar_detector_train/{name}.json").read_text())
+        assert record["status"] == "FINISHED" and record["parent"] in TABLES
+        curves = {m[0] for m in record["metrics"] if m[2] > 0}
+        assert {"train/loss", "train/heatmap", "train/yaw"} <= curves
+        assert any(a[0].endswith("curves.png") for a in record["artifacts"])
+
+
+def test_tables_have_paper_values_and_scores(built, cfg):
+    for table_id in TABLES:
+        md = (built / f"results/tables/{table_id}.md").read_text()
+        assert "(paper)" in md and "(ours)" in md and "Scorecard" in md
+        csv = pd.read_csv(built / f"results/tables/{table_id}.csv")
+        rows = set(csv.iloc[:, 0])
+        assert set(cfg["tables"][table_id]) <= rows
+        score = json.loads((built / f"results/tables/{table_id}.score.json").read_text())
+        assert score["rows_both"] >= len(cfg["tables"][table_id]) and score["claims_total"] >= 2
+        assert (built / f"results/tables/{table_id}.tex").exists()
+    t1 = pd.read_csv(built / "results/tables/mccraith_ch7_table1.csv").set_index("row")
+    assert t1.loc["McCraith et al. [2022] †", "status"] == "ours + paper"      # the ch. 6 stage's numbers
+    scorecard = (built / "results/tables/scorecard.md").read_text()
+    assert all(t in scorecard for t in TABLES)

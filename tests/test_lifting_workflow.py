@@ -1,0 +1,63 @@
+"""The lifting stage (McCraith ch. 6) in the session's tiny build: tables, per-configuration metrics, the
+full-method metrics chapter 7 reads, the auto-labels, run records and the bad-input messages."""
+import json
+
+import numpy as np
+import pytest
+import yaml
+
+from conftest import ROOT
+
+pytestmark = pytest.mark.workflow
+
+TABLES = ("mccraith_ch6_table1", "mccraith_ch6_table2", "mccraith_ch6_table3", "mccraith_ch6_table4")
+
+
+def _lifting_cfg():
+    return yaml.safe_load((ROOT / "config.yaml").read_text())["lifting"]
+
+
+def test_tables_written_with_paper_values_and_scorecard(built):
+    for table in TABLES:
+        md = (built / "results" / "tables" / f"{table}.md").read_text()
+        assert "(paper)" in md and "Scorecard" in md, table
+        for ext in ("csv", "tex", "score.json"):
+            assert (built / "results" / "tables" / f"{table}.{ext}").stat().st_size > 0
+        score = json.loads((built / "results" / "tables" / f"{table}.score.json").read_text())
+        assert score["rows_both"] == len(_lifting_cfg()["tables"][table])   # every row of ours named as the paper's
+    scorecard = (built / "results" / "tables" / "scorecard.md").read_text()
+    assert all(t in scorecard for t in TABLES)
+    t2 = (built / "results" / "tables" / "mccraith_ch6_table2.md").read_text()
+    assert "Goel et al. [8]" in t2 and "(g) Ours, 128 bins" in t2
+    t3 = (built / "results" / "tables" / "mccraith_ch6_table3.md").read_text()
+    assert "paper only: literature, not reproduced" in t3      # VS3D / Zakharov rows
+
+
+def test_every_configuration_has_metrics_and_a_model(built):
+    for run in _lifting_cfg()["runs"]:
+        metrics = json.loads((built / "results" / "lifting" / "metrics" / f"{run}.json").read_text())
+        assert "Car_bev_0.5/moderate_R40" in metrics and "Car_3d_0.5/hard_R11" in metrics
+        assert (built / "results" / "lifting" / "models" / f"{run}.pt").stat().st_size > 1000
+        record = json.loads((built / "results" / "runs" / "lifting_run" / f"{run}.json").read_text())
+        assert record["status"] == "FINISHED" and record["parent"].startswith("mccraith_ch6_table")
+        steps = [m for m in record["metrics"] if m[0] == "train/total"]
+        assert steps and all(np.isfinite(m[1]) for m in steps)            # a training curve, never NaN
+
+
+def test_full_method_metrics_for_chapter_7(built):
+    path = built / "results" / "lifting" / "metrics" / f"{_lifting_cfg()['full_method']}.json"
+    assert path.name == "full_cityscapes.json"
+    metrics = json.loads(path.read_text())
+    for key in ("Car_bev_0.7/moderate_R40", "Car_bev_0.7/easy_R11", "Car_bev_0.5/hard_R40", "Car_3d_0.7/moderate_R40"):
+        assert key in metrics
+    assert {"n_gt/easy", "n_gt/moderate", "n_gt/hard"} <= set(metrics)
+
+
+def test_auto_labels_and_bad_input_messages(built):
+    cfg = _lifting_cfg()
+    source = cfg["runs"]["labels_cityscapes"]["labels_from"]
+    with np.load(built / "results" / "lifting" / "labels" / f"{source}.npz") as z:
+        assert z["box"].shape[1] == 7 and len(z["box"]) == len(z["detection"]) > 0
+        assert np.isfinite(z["box"]).all() and np.allclose(z["box"][:, 3:6], [3.9, 1.6, 1.5])
+    log = (built / "results" / "logs" / "lifting_run" / "full_coco.log").read_text()
+    assert "objects kept of" in log and "fewer than 3 finite LiDAR points" in log

@@ -1,0 +1,135 @@
+"""Tables and figures of the depth stage from the per-frame results of the evaluation runs (pure, no torch).
+
+Rows of one table that form a comparison group (``Row.group``; e.g. the Eigen and the Odometry halves of
+ch. 4 Table 6) are averaged over the same frames: those evaluated in every row of the group. Frames that a
+row could not evaluate (missing neighbour frame, no valid ground truth, ...) are left out of the whole group;
+the ``skipped`` column counts the frames a row itself could not evaluate, and ``info["reasons"]`` says why.
+"""
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence as Seq
+
+import numpy as np
+import pandas as pd
+
+from redsup.depth.configs import METRIC_COLUMNS, Row
+from redsup.depth import evaluation
+
+TIME_COLUMN = {"mccraith_ch4_table3": "Seconds per Image", "mccraith_ch4_table6": "time [s]"}
+
+
+def row_records(row: Row, result: Mapping) -> list[dict]:
+    """The records of ``result`` that ``row`` reads (its checkpoint)."""
+    return [r for r in result["records"] if int(r["step"]) == int(row.step)]
+
+
+def common_frames(rows: Seq[Row], results: Seq[Mapping]) -> set[tuple[str, int]]:
+    """(sequence, frame) evaluated in every one of ``rows``."""
+    sets = [{(r["sequence"], r["frame"]) for r in row_records(row, res) if r.get("metrics") is not None}
+            for row, res in zip(rows, results)]
+    return set.intersection(*sets) if sets else set()
+
+
+def table_frame(table_id: str, rows: Seq[Row], results: Seq[Mapping]) -> tuple[pd.DataFrame, dict]:
+    """(ours, info) for ``write_table``: one line per row with the seven metrics, the time column where the
+    thesis has one, ``frames`` (averaged: the group's common frames) and ``skipped`` (frames this row could not
+    evaluate: missing neighbour, no valid ground truth, ...); info holds the skip reasons and the frame counts
+    per group."""
+    groups: dict[str, list[int]] = {}
+    for i, row in enumerate(rows):
+        groups.setdefault(row.group, []).append(i)
+    keep: dict[int, set] = {}
+    info: dict = {"groups": {}, "reasons": []}
+    for g, idx in groups.items():
+        frames = common_frames([rows[i] for i in idx], [results[i] for i in idx])
+        for i in idx:
+            keep[i] = frames
+        info["groups"][g or "all"] = len(frames)
+    lines = []
+    for i, (row, res) in enumerate(zip(rows, results)):
+        recs = row_records(row, res)
+        kept = [r for r in recs if (r["sequence"], r["frame"]) in keep[i]]
+        agg = evaluation.aggregate([r.get("metrics") for r in kept])
+        line = {"row": row.label}
+        for key, col in METRIC_COLUMNS.items():
+            line[col] = agg.get(key, np.nan)
+        secs = [r["seconds"] for r in kept if r.get("seconds") is not None]
+        if table_id in TIME_COLUMN:
+            line[TIME_COLUMN[table_id]] = float(np.mean(secs)) if secs else np.nan
+        line["frames"] = len(kept)
+        line["skipped"] = sum("reason" in r for r in recs)
+        reasons = sorted({r["reason"] for r in recs if "reason" in r})
+        info["reasons"] += [f"{row.label}: {x}" for x in reasons]
+        lines.append(line)
+    df = pd.DataFrame(lines).set_index("row")
+    return df, info
+
+
+def last_quarter(rows: Seq[Row], results: Seq[Mapping]) -> list[float]:
+    """Abs Rel of each row over the last quarter of the common frames (in sequence / frame order)."""
+    frames = sorted(common_frames(rows, results))
+    tail = set(frames[len(frames) - max(1, len(frames) // 4):]) if frames else set()
+    out = []
+    for row, res in zip(rows, results):
+        vals = [r["metrics"]["abs_rel"] for r in row_records(row, res)
+                if (r["sequence"], r["frame"]) in tail and r.get("metrics")]
+        out.append(float(np.mean(vals)) if vals else np.nan)
+    return out
+
+
+def per_frame(row: Row, result: Mapping, metric: str = "abs_rel") -> list[tuple[str, int, float]]:
+    """(sequence, frame, metric) of every evaluated frame of ``row``, in order."""
+    return sorted((r["sequence"], r["frame"], r["metrics"][metric]) for r in row_records(row, result)
+                  if r.get("metrics") is not None)
+
+
+def fig4(rows: Seq[Row], results: Seq[Mapping]):
+    """Per-frame Abs Rel along the long sequence(s): baseline vs sequential adaptation."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(8, 3.2))
+    for row, res in zip(rows, results):
+        pts = per_frame(row, res)
+        seqs = sorted({p[0] for p in pts})
+        offset, xs, ys = 0, [], []
+        for s in seqs:  # sequences side by side
+            f = [(p[1], p[2]) for p in pts if p[0] == s]
+            xs += [offset + t for t, _ in f]
+            ys += [v for _, v in f]
+            offset += max(t for t, _ in f) + 1
+        ax.plot(xs, ys, lw=1.0, label=f"{row.label} (mean {np.mean(ys):.3f})" if ys else row.label)
+    ax.set_xlabel("frame of the long sequence")
+    ax.set_ylabel("Abs Rel")
+    ax.set_title("Per-frame depth error along the long sequence (ch. 4 Fig. 4)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def fig5(rows: Seq[Row], results: Seq[Mapping], table: pd.DataFrame):
+    """Abs Rel vs adaptation steps for the other-domain (CS) and the target-domain (K) model."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.5, 3.6))
+    series: dict[str, list[tuple[int, float]]] = {}
+    for row in rows:
+        tag, step = row.label.split(" | ")
+        series.setdefault(tag, []).append((int(step), float(table.loc[row.label, "Abs Rel"])))
+    names = {"CS": "CS: trained on the other domain", "K": "K: trained on the target domain"}
+    for tag, pts in series.items():
+        pts.sort()
+        ax.plot([p[0] for p in pts], [p[1] for p in pts], marker="o", label=names.get(tag, tag))
+    ax.set_xlabel("adaptation steps per frame (0 = no adaptation)")
+    ax.set_ylabel("Abs Rel")
+    ax.set_title("Accuracy vs adaptation steps (ch. 4 Fig. 5)")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig

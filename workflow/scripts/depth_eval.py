@@ -1,0 +1,41 @@
+"""Snakemake entry point: one evaluation configuration of the depth tables (adaptation run or prediction only)."""
+import sys
+
+sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821  (log first)
+
+import json  # noqa: E402
+
+import torch  # noqa: E402
+
+from redsup.depth import checkpoint, configs, data, experiments  # noqa: E402
+from redsup.fileio import write_text_atomic  # noqa: E402
+from redsup.runlog import child_run  # noqa: E402
+
+sm = snakemake  # noqa: F821
+torch.set_num_threads(sm.threads)
+cfg = sm.config["depth"]
+rows = configs.table_rows(cfg, *configs.availability(sm.config))
+runs, _ = configs.plan(rows)
+spec, parent = runs[sm.wildcards.run]
+
+with child_run(sm.log.run, parent, spec.name, rule=sm.rule, wildcards=dict(sm.wildcards), config=sm.config,
+               params=spec.as_dict()) as run:
+    models, meta = checkpoint.load(sm.input.model)
+    stereo = sm.input.get("stereo")
+    seqs = []
+    for k, (scene_dir, npz, gt) in enumerate(zip(sm.input.scenes, sm.input.images, sm.input.gt)):
+        seq = data.load_sequence(npz, scene_dir=scene_dir, stereo_npz=stereo[k] if stereo else None,
+                                 stereo_baseline=meta.get("stereo_baseline"))
+        seqs.append(experiments.EvalSequence(seq, data.read_gt_depth(gt)))
+    result = experiments.run_spec(spec, models, meta, seqs, cfg,
+                                  progress=lambda i, n: print(f"{i}/{n}", flush=True) if i % 10 == 0 else None)
+    curve_name = "adapt_loss" if spec.kind != "direct" else "direct_loss"
+    for step, value in enumerate(result["loss_curve"], start=1):
+        run.log_metric(curve_name, value, step=step)
+    for step, agg in result["summary"].items():
+        run.log_metrics({k: v for k, v in agg.items() if isinstance(v, (int, float))}, step=step)
+        for reason in agg["skip_reasons"]:
+            print(f"skipped (step {step}): {reason}")
+    write_text_atomic(sm.output[0], json.dumps(result, indent=1, default=float))
+    print(json.dumps({k: {m: v for m, v in a.items() if m != "skip_reasons"} for k, a in result["summary"].items()},
+                     indent=1))

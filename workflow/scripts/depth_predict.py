@@ -1,0 +1,33 @@
+"""Snakemake entry point: raw network depth (no scaling) of every frame of one scene, at the prepared size."""
+import sys
+
+sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821  (log first)
+
+import time  # noqa: E402
+
+import torch  # noqa: E402
+
+from redsup.depth import checkpoint, data  # noqa: E402
+from redsup.depth.configs import model_parent  # noqa: E402
+from redsup.depth.experiments import predict_sequence  # noqa: E402
+from redsup.fileio import save_npz_atomic  # noqa: E402
+from redsup.runlog import child_run  # noqa: E402
+
+sm = snakemake  # noqa: F821
+torch.set_num_threads(sm.threads)
+dev = sm.config["depth"]["device"]
+device = dev if dev != "auto" else ("cuda" if torch.cuda.is_available() else "cpu")
+name = f"{sm.wildcards.dataset}/{sm.wildcards.mode}/{sm.wildcards.scene}"
+parent = model_parent(sm.config["depth"], f"{sm.wildcards.dataset}/{sm.wildcards.mode}")
+with child_run(sm.log.run, parent, f"predict {name}", rule=sm.rule, wildcards=dict(sm.wildcards),
+               config=sm.config) as run:
+    models, meta = checkpoint.load(sm.input.model, device)
+    images, K = data.read_prepared(sm.input.images)
+    start = time.perf_counter()
+    depth = predict_sequence(models, images, meta, device=device)
+    seconds = time.perf_counter() - start
+    save_npz_atomic(sm.output[0], depth=depth, K=K.astype(float))
+    stats = {"frames": len(depth), "seconds_per_image": seconds / max(1, len(depth)),
+             "median_depth": float(torch.as_tensor(depth).median()) if len(depth) else float("nan")}
+    run.log_metrics(stats)
+    print(stats)

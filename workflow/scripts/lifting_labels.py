@@ -1,0 +1,25 @@
+"""Snakemake entry point: our automatically generated labels, the lifted boxes of the training detections
+(McCraith ch. 6 Table IV (iii))."""
+import sys
+
+sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821  (log first)
+
+import torch  # noqa: E402
+
+from redsup.fileio import save_npz_atomic  # noqa: E402
+from redsup.lifting.pipeline import load_model, make_labels, resolve_device, scene_inputs  # noqa: E402
+from redsup.runlog import child_run  # noqa: E402
+
+sm = snakemake  # noqa: F821
+torch.set_num_threads(sm.threads)
+cfg = sm.config["lifting"]
+name = sm.wildcards.run
+spec = cfg["runs"][name]
+scenes = scene_inputs(sm.input.train_scenes, sm.input.train_detections, sm.input.train_tracks)
+with child_run(sm.log.run, "mccraith_ch6_table4", f"labels_{name}", rule=sm.rule, wildcards=dict(sm.wildcards),
+               config=sm.config, params={"run": spec}) as run:
+    model = load_model(sm.input.model, resolve_device(cfg["device"]))
+    labels = make_labels(model, spec, cfg, scenes, seed=int(sm.config["seed"]))
+    save_npz_atomic(sm.output[0], **labels)
+    run.log_metrics({"labels": float(len(labels["box"]))})
+    print(f"{len(labels['box'])} labels from {len(scenes)} scenes")

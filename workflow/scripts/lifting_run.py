@@ -1,0 +1,34 @@
+"""Snakemake entry point: train one lifting configuration (McCraith ch. 6) and evaluate it on the test scenes."""
+import sys
+
+sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821  (log first)
+
+import json  # noqa: E402
+
+import torch  # noqa: E402
+
+from redsup.fileio import write_text_atomic  # noqa: E402
+from redsup.lifting.pipeline import run_configuration, save_model, scene_inputs  # noqa: E402
+from redsup.lifting.tables import parent_table  # noqa: E402
+from redsup.runlog import child_run  # noqa: E402
+
+sm = snakemake  # noqa: F821
+torch.set_num_threads(sm.threads)
+cfg = sm.config["lifting"]
+name = sm.wildcards.run
+spec = cfg["runs"][name]
+train = scene_inputs(sm.input.train_scenes, sm.input.train_detections, sm.input.train_tracks)
+test = scene_inputs(sm.input.test_scenes, sm.input.test_detections)
+labels = sm.input.labels if "labels" in sm.input.keys() else None
+with child_run(sm.log.run, parent_table(cfg["tables"], name), name, rule=sm.rule, wildcards=dict(sm.wildcards),
+               config=sm.config, params={"run": spec, "train": cfg["train"], "loss": cfg["loss"],
+                                         "network": cfg["network"], "max_points": cfg["max_points"]}) as run:
+    model, metrics, info = run_configuration(spec, cfg, train, test, seed=int(sm.config["seed"]), labels_path=labels,
+                                             log=run.log_metric, camera=sm.config["detection"]["camera"],
+                                             min_depth=sm.config["detection"]["points"]["min_depth"])
+    run.log_metrics(metrics)
+    run.log_metrics(info)
+    save_model(model, spec, cfg, sm.output.model)
+    write_text_atomic(sm.output.info, json.dumps(info, indent=1, sort_keys=True) + "\n")
+    write_text_atomic(sm.output.metrics, json.dumps(metrics, indent=1, sort_keys=True) + "\n")
+    print(json.dumps({k: v for k, v in metrics.items() if "_0.5/" in k and k.endswith("R40")}, indent=1))
