@@ -52,7 +52,7 @@ def test_tables_have_paper_values_and_scores(built, cfg):
     for table_id in TABLES:
         md = (built / f"results/tables/{table_id}.md").read_text()
         assert "(paper)" in md and "(ours)" in md and "Scorecard" in md
-        csv = pd.read_csv(built / f"results/tables/{table_id}.csv")
+        csv = pd.read_csv(built / f"results/tables/{table_id}.csv", dtype=str)
         rows = set(csv.iloc[:, 0])
         assert set(cfg["tables"][table_id]) <= rows
         score = json.loads((built / f"results/tables/{table_id}.score.json").read_text())

@@ -24,13 +24,7 @@ def kendall_tau(ours: Sequence[float], paper: Sequence[float]) -> float:
         raise ValueError(f"kendall_tau: lengths differ ({len(x)} vs {len(y)})")
     if len(x) < 2:
         return math.nan
-    try:
-        from scipy.stats import kendalltau
-    except ImportError:  # pragma: no cover - scipy is a dependency; pure-python fallback
-        return _tau_b(x, y)
-    with _quiet():
-        tau = kendalltau(x, y, variant="b").statistic
-    return float(tau)
+    return _tau_b(x, y)  # tables are small: O(n^2) pure Python beats importing scipy per job
 
 
 def _tau_b(x: list[float], y: list[float]) -> float:
@@ -50,20 +44,6 @@ def _tau_b(x: list[float], y: list[float]) -> float:
                 discordant += 1
     denom = math.sqrt((concordant + discordant + ties_x) * (concordant + discordant + ties_y))
     return (concordant - discordant) / denom if denom else math.nan
-
-
-class _quiet:
-    """Silence scipy's warning for constant input (we return NaN then)."""
-
-    def __enter__(self):
-        import warnings
-
-        self._ctx = warnings.catch_warnings()
-        self._ctx.__enter__()
-        warnings.simplefilter("ignore")
-
-    def __exit__(self, *exc):
-        return self._ctx.__exit__(*exc)
 
 
 def headline_tau(ours: pd.DataFrame, paper: pd.DataFrame, metric: str | None) -> dict:
