@@ -182,15 +182,32 @@ def test_medianflow_split_file_failures_and_bins(tmp_path):
     assert summary["vehicles_with_failure"] >= 1 and summary["n_near"] == summary["n_far"] == summary["n_medium"] == 1
 
 
-def test_medianflow_bad_clips_name_the_file(tmp_path):
+def test_medianflow_bad_clips_are_counted_per_clip_and_name_the_file(tmp_path):
+    cfg = {"n_frames": 40, "near": 20.0, "far": 45.0}
     frames, truth = render_clip(n=40)
-    write_clip(tmp_path / "a", 1, frames[:39], [vehicle(truth[-1], 12.0, 1)])
-    with pytest.raises(SceneError, match="040"):
-        write_medianflow(tmp_path / "a", tmp_path / "a.npz", {"n_frames": 40, "near": 20.0, "far": 45.0})
-    write_clip(tmp_path / "b", 1, frames, [vehicle(truth[-1], 12.0, 1)])
-    (tmp_path / "b" / "clips" / "1" / "annotation.json").write_text("[{")
+    split = tmp_path / "s"
+    write_clip(split, 1, frames, [vehicle(truth[-1], 12.0, 1)])                     # clean
+    write_clip(split, 2, frames, [vehicle(truth[-1], 12.0, 2)])
+    (split / "clips" / "2" / "imgs" / "010.png").unlink()                           # one frame missing
+    write_clip(split, 3, frames[:39], [vehicle(truth[-1], 12.0, 3)])                # the last frame missing
+    write_clip(split, 4, frames, [vehicle(truth[-1], 12.0, 4)])
+    (split / "clips" / "4" / "annotation.json").write_text("[{")                    # malformed annotation
+    summary = write_medianflow(split, tmp_path / "m.npz", cfg)
+    assert summary["n_clips_skipped"] == 1 and summary["n_clips_missing_frames"] == 2
+    assert summary["n_vehicles"] == 3 and summary["n_clips"] == 3
+    text = "\n".join(summary["problems"])
+    assert "clips/4/annotation.json" in text and "010.png missing" in text and "040.png missing" in text
+    with np.load(tmp_path / "m.npz") as d:
+        assert d["clip"].tolist() == [1, 2, 3]
+        assert not d["failed"][0].any()
+        assert d["failed"][1, 9] and d["failed"][1].sum() == 1                      # only the missing frame
+        np.testing.assert_allclose(d["boxes"][1, :9], d["boxes"][0, :9], atol=1.0)  # tracking went on before it
+        assert d["failed"][2].all()                                                 # cannot initialise
+    only_bad = tmp_path / "bad"
+    write_clip(only_bad, 1, frames, [vehicle(truth[-1], 12.0, 1)])
+    (only_bad / "clips" / "1" / "annotation.json").write_text("{}")
     with pytest.raises(SceneError, match="annotation.json"):
-        write_medianflow(tmp_path / "b", tmp_path / "b.npz", {"n_frames": 40, "near": 20.0, "far": 45.0})
+        write_medianflow(only_bad, tmp_path / "b.npz", cfg)
 
 
 @pytest.mark.skipif(not REAL_TUSIMPLE.exists(), reason="real TuSimple sample not available")

@@ -4,6 +4,12 @@ Each annotated vehicle's last-frame box initialises OpenCV contrib's MedianFlow,
 through the clip; boxes are returned in forward time order. A failed update keeps the previous box and
 sets its `failed` flag (a failed initialisation flags every frame), so failures are visible downstream.
 
+Bad input is reported per clip, never a crash of the split: a missing or unreadable frame is a failed
+frame (the tracker skips it and keeps its box; a missing last frame fails the whole track, as the box
+cannot be initialised), and a clip whose annotation.json is missing or malformed is skipped. Both are
+counted in the summary (`n_clips_missing_frames`, `n_clips_skipped`) and listed in `problems`, each
+naming the file. Only a split with no usable clip at all is an error.
+
 `medianflow.npz` per clip split (N vehicles, T frames): clip (N,) int64, track_id (N,) int64, boxes
 (N, T, 4) float32 x, y, w, h, failed (N, T) bool, velocity (N, 2) [vz, vx], position (N, 2) [z, x] (TuSimple order),
 distance (N,) = position z, bin (N,) str near / medium / far, bin_index (N,) int8 (0, 1, 2).
@@ -15,6 +21,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from tqdm import tqdm
 
 from redsup.datastats import distance_bin
 from redsup.fileio import save_npz_atomic
@@ -23,8 +30,9 @@ from redsup.sceneio import SceneError
 BINS = ("near", "medium", "far")
 
 
-def track_backward(frames: list[np.ndarray], box_xywh) -> tuple[np.ndarray, np.ndarray]:
-    """Track a box given in the last frame backward; ((T, 4) x, y, w, h in forward order, (T,) failed)."""
+def track_backward(frames: list[np.ndarray | None], box_xywh) -> tuple[np.ndarray, np.ndarray]:
+    """Track a box given in the last frame backward; ((T, 4) x, y, w, h in forward order, (T,) failed).
+    A frame given as None (missing) is a failed frame: the box is kept and tracking goes on before it."""
     n = len(frames)
     boxes = np.zeros((n, 4), dtype=np.float32)
     failed = np.zeros(n, dtype=bool)
@@ -32,17 +40,20 @@ def track_backward(frames: list[np.ndarray], box_xywh) -> tuple[np.ndarray, np.n
     boxes[:] = box
     tracker = cv2.legacy.TrackerMedianFlow_create()
     try:
-        ok = tracker.init(frames[-1], box)
+        ok = frames[-1] is not None and tracker.init(frames[-1], box)
     except cv2.error:
         ok = False
     if ok is False:
         failed[:] = True
         return boxes, failed
     for t in range(n - 2, -1, -1):
-        try:
-            ok, new = tracker.update(frames[t])
-        except cv2.error:
+        if frames[t] is None:
             ok, new = False, box
+        else:
+            try:
+                ok, new = tracker.update(frames[t])
+            except cv2.error:
+                ok, new = False, box
         if ok and np.all(np.isfinite(new)) and new[2] > 0 and new[3] > 0:
             box = tuple(float(v) for v in new)
         else:
@@ -51,23 +62,17 @@ def track_backward(frames: list[np.ndarray], box_xywh) -> tuple[np.ndarray, np.n
     return boxes, failed
 
 
-def _frame_paths(clip_dir: Path, n_frames: int) -> list[Path]:
-    paths = []
-    for k in range(1, n_frames + 1):
-        for ext in ("png", "jpg"):
-            path = clip_dir / "imgs" / f"{k:03d}.{ext}"
-            if path.exists():
-                paths.append(path)
-                break
-        else:
-            raise SceneError(f"{clip_dir / 'imgs'}: frame {k:03d}.png missing (a clip has {n_frames} frames)")
-    return paths
+def _frame_path(clip_dir: Path, k: int) -> Path | None:
+    for ext in ("png", "jpg"):
+        path = clip_dir / "imgs" / f"{k:03d}.{ext}"
+        if path.exists():
+            return path
+    return None
 
 
-def read_clip(clip_dir: str | Path, n_frames: int) -> tuple[list[np.ndarray], list[dict]]:
-    """(frames as BGR images, annotations) of one clip; SceneError naming the file on bad input."""
-    clip_dir = Path(clip_dir)
-    path = clip_dir / "annotation.json"
+def read_annotations(clip_dir: str | Path) -> list[dict]:
+    """The annotated vehicles of one clip; SceneError naming annotation.json on bad input."""
+    path = Path(clip_dir) / "annotation.json"
     try:
         annotations = json.loads(path.read_text())
     except FileNotFoundError as exc:
@@ -77,18 +82,33 @@ def read_clip(clip_dir: str | Path, n_frames: int) -> tuple[list[np.ndarray], li
     if not isinstance(annotations, list):
         raise SceneError(f"{path}: expected a list of annotated vehicles")
     for a in annotations:
-        if not all(k in a for k in ("bbox", "velocity", "position")) or \
+        if not isinstance(a, dict) or not all(k in a for k in ("bbox", "velocity", "position")) or \
+                not isinstance(a["bbox"], dict) or \
                 not all(k in a["bbox"] for k in ("top", "left", "bottom", "right")):
             raise SceneError(f"{path}: each entry needs bbox{{top, left, bottom, right}}, velocity, position")
-    frames = []
-    for p in _frame_paths(clip_dir, n_frames):
-        image = cv2.imread(str(p), cv2.IMREAD_COLOR)
-        if image is None:
-            raise SceneError(f"{p}: unreadable image")
+    return annotations
+
+
+def read_frames(clip_dir: str | Path, n_frames: int) -> tuple[list[np.ndarray | None], list[str]]:
+    """(frames as BGR images, None where missing or unreadable, problems naming each such file).
+    Frames of another size than the last frame count as unreadable."""
+    clip_dir = Path(clip_dir)
+    frames: list[np.ndarray | None] = []
+    problems: list[str] = []
+    for k in range(1, n_frames + 1):
+        path = _frame_path(clip_dir, k)
+        image = None if path is None else cv2.imread(str(path), cv2.IMREAD_COLOR)
+        if path is None:
+            problems.append(f"{clip_dir / 'imgs'}: frame {k:03d}.png missing (a clip has {n_frames} frames)")
+        elif image is None:
+            problems.append(f"{path}: unreadable image")
         frames.append(image)
-    if len({f.shape for f in frames}) != 1:
-        raise SceneError(f"{clip_dir / 'imgs'}: frames differ in size")
-    return frames, annotations
+    shape = next((f.shape for f in reversed(frames) if f is not None), None)
+    for k, f in enumerate(frames):
+        if f is not None and f.shape != shape:
+            problems.append(f"{clip_dir / 'imgs'}: frame {k + 1:03d} is {f.shape[:2]}, the clip is {shape[:2]}")
+            frames[k] = None
+    return frames, problems
 
 
 def clip_dirs(split_dir: str | Path) -> list[Path]:
@@ -104,12 +124,24 @@ def clip_dirs(split_dir: str | Path) -> list[Path]:
 
 
 def track_split(split_dir: str | Path, medianflow_cfg: dict) -> tuple[dict, dict]:
-    """(arrays of medianflow.npz, summary numbers) for one clip split."""
+    """(arrays of medianflow.npz, summary numbers incl. `problems`) for one clip split."""
     n_frames = medianflow_cfg["n_frames"]
     near, far = medianflow_cfg["near"], medianflow_cfg["far"]
     cols = {k: [] for k in ("clip", "track_id", "boxes", "failed", "velocity", "position", "bin_index")}
-    for clip_dir in clip_dirs(split_dir):
-        frames, annotations = read_clip(clip_dir, n_frames)
+    dirs = clip_dirs(split_dir)
+    problems: list[str] = []
+    n_skipped = n_missing = 0
+    for clip_dir in tqdm(dirs, desc=f"MedianFlow {Path(split_dir).name}", unit="clip", mininterval=5):
+        try:
+            annotations = read_annotations(clip_dir)
+        except SceneError as exc:
+            problems.append(f"{exc} (clip skipped)")
+            n_skipped += 1
+            continue
+        frames, frame_problems = read_frames(clip_dir, n_frames)
+        if frame_problems:
+            n_missing += 1
+            problems.extend(f"{p} (a failed frame of every vehicle in the clip)" for p in frame_problems)
         for k, a in enumerate(annotations):
             b = a["bbox"]
             xywh = (b["left"], b["top"], b["right"] - b["left"], b["bottom"] - b["top"])
@@ -121,6 +153,10 @@ def track_split(split_dir: str | Path, medianflow_cfg: dict) -> tuple[dict, dict
             cols["velocity"].append(a["velocity"])
             cols["position"].append(a["position"])
             cols["bin_index"].append(int(distance_bin(float(a["position"][0]), (near, far))))
+    if dirs and n_skipped == len(dirs):
+        raise SceneError(f"{Path(split_dir) / 'clips'}: no usable clip; first problem: {problems[0]}")
+    for p in problems:
+        print(f"warning: {p}")
     n = len(cols["clip"])
     position = np.array(cols["position"], dtype=np.float64).reshape(n, 2)
     bin_index = np.array(cols["bin_index"], dtype=np.int8)
@@ -134,7 +170,8 @@ def track_split(split_dir: str | Path, medianflow_cfg: dict) -> tuple[dict, dict
     }
     summary = {"n_vehicles": n, "n_clips": len(set(cols["clip"])),
                "failed_frame_fraction": float(failed.mean()) if n else 0.0,
-               "vehicles_with_failure": int(failed.any(axis=1).sum())}
+               "vehicles_with_failure": int(failed.any(axis=1).sum()),
+               "n_clips_skipped": n_skipped, "n_clips_missing_frames": n_missing, "problems": problems}
     for i, name in enumerate(BINS):
         summary[f"n_{name}"] = int(np.count_nonzero(bin_index == i))
     return arrays, summary
