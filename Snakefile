@@ -19,7 +19,7 @@ include: "workflow/rules/depth.smk"
 include: "workflow/rules/calibration.smk"
 include: "workflow/rules/lifting.smk"
 include: "workflow/rules/lidar_detector.smk"
-include: "workflow/rules/adapters.smk"  # real datasets into the canonical format (docs/real_datasets.md)
+include: "workflow/rules/adapters.smk"  # real datasets into the canonical format (README.md, "Running on the real datasets")
 include: "workflow/rules/tables.smk"  # last: it collects every stage's table and figure ids
 
 

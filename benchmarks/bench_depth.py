@@ -19,29 +19,18 @@ from __future__ import annotations
 import argparse
 import functools
 import statistics
-import time
 
 import numpy as np
 import torch
 
 from redsup.depth import adaptation, data, experiments, networks, pipeline
+from timing import median_time
 
 
 def _batch(b: int, h: int, w: int) -> dict:
     K = torch.tensor([[0.58 * w, 0.0, (w - 1) / 2], [0.0, 1.92 * h, (h - 1) / 2], [0.0, 0.0, 1.0]])
     return {"target": torch.rand(b, 3, h, w), "K": K.expand(b, 3, 3).clone(),
             "sources": {"prev": torch.rand(b, 3, h, w), "next": torch.rand(b, 3, h, w)}}
-
-
-def _median_time(fn, repeats: int, warmup: int = 1) -> float:
-    for _ in range(warmup):
-        fn()
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
 
 
 def bench(h: int, w: int, width: int, batch: int, repeats: int) -> dict:
@@ -51,19 +40,19 @@ def bench(h: int, w: int, width: int, batch: int, repeats: int) -> dict:
     optimizer, _ = pipeline.make_optimizer(models)
     train_batch = _batch(batch, h, w)
     models.train()
-    train_s = _median_time(lambda: pipeline.train_step(models, optimizer, train_batch), repeats)
+    train_s = median_time(lambda: pipeline.train_step(models, optimizer, train_batch), repeats)
 
     test_batch = _batch(1, h, w)
     params = adaptation.select_parameters(models, ["depth_encoder", "pose_encoder"])
     loss_fn = functools.partial(pipeline.batch_loss, noise_std=0.0)
-    adapt_s = _median_time(lambda: adaptation.adapt(models, loss_fn, test_batch, params, 1e-3, 1), repeats)
+    adapt_s = median_time(lambda: adaptation.adapt(models, loss_fn, test_batch, params, 1e-3, 1), repeats)
 
     models.eval()
 
     def infer():
         with torch.no_grad():
             pipeline.predict_depth(models, test_batch["target"])
-    infer_s = _median_time(infer, repeats)
+    infer_s = median_time(infer, repeats)
     return {"size": f"{w}x{h}", "width": width, "params_M": n_params / 1e6, "batch": batch,
             "train_step_s": train_s, "train_img_per_s": batch / train_s, "adapt_step_s": adapt_s,
             "infer_s": infer_s, "seq5_s": infer_s + 5 * adapt_s, "inst50_s": infer_s + 50 * adapt_s}

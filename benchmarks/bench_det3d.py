@@ -22,14 +22,11 @@ import torch
 
 from redsup.det3d import boxes as box_ops
 from redsup.det3d import kitti_eval, losses, template
+from timing import run_times
 
 
-def timeit(fn, repeats: int) -> tuple[float, list[float]]:
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
+def _timed(fn, repeats):
+    times = run_times(fn, repeats)
     return statistics.median(times), times
 
 
@@ -64,11 +61,11 @@ def bench_chamfer(repeats: int, n_obj: int, n_bins: int, n_pts: int, brute_objec
                 template.distance_to_template(tmpl, pts[:k, None], trans[:k, None], yaws[:k])
         return run
 
-    f_med, _ = timeit(field_fwd, repeats)
-    fb_med, _ = timeit(field_fwd_bwd, repeats)
+    f_med, _ = _timed(field_fwd, repeats)
+    fb_med, _ = _timed(field_fwd_bwd, repeats)
     k = min(brute_objects, n_obj)
-    b_med, _ = timeit(brute(k), max(1, min(repeats, 3)))
-    fs_med, _ = timeit(field_slice(k), repeats)
+    b_med, _ = _timed(brute(k), max(1, min(repeats, 3)))
+    fs_med, _ = _timed(field_slice(k), repeats)
     brute_full = b_med * n_obj / k
     n = n_obj * n_bins * n_pts
     print(f"chamfer: template {len(tmpl.points)} vertices, field {tuple(tmpl.field.shape)} "
@@ -93,14 +90,14 @@ def bench_iou(repeats: int) -> None:
         b = a + np.c_[rng.normal(0, 0.5, (n, 3)), rng.normal(0, 0.1, (n, 3)), rng.normal(0, 0.2, n)][:m]
         pairs = len(box_ops.candidate_pairs(a, b)[0])
         for method in ("numpy", "shapely"):
-            med, _ = timeit(lambda: box_ops.bev_iou(a, b, method=method), repeats)
-            med3, _ = timeit(lambda: box_ops.iou_3d(a, b, method=method), repeats)
+            med, _ = _timed(lambda: box_ops.bev_iou(a, b, method=method), repeats)
+            med3, _ = _timed(lambda: box_ops.iou_3d(a, b, method=method), repeats)
             print(f"bev_iou: {n}x{m} boxes ({pairs} candidate pairs) {method:8s} bev {med * 1e3:7.2f} ms, "
                   f"3d {med3 * 1e3:7.2f} ms")
     n_pairs = 20000
     a, b = random_boxes(rng, n_pairs, 4.0), random_boxes(rng, n_pairs, 4.0)
     for method in ("numpy", "shapely"):
-        med, _ = timeit(lambda: box_ops.bev_intersection_pairs(a, b, method=method), repeats)
+        med, _ = _timed(lambda: box_ops.bev_intersection_pairs(a, b, method=method), repeats)
         print(f"bev_iou: {n_pairs} aligned overlapping pairs, {method:8s} {med * 1e3:7.1f} ms "
               f"({med / n_pairs * 1e6:.2f} us/pair)")
 
@@ -131,7 +128,7 @@ def bench_ap(repeats: int, n_frames: int) -> None:
     n_gt = sum(len(g.cls) for g in gts)
     n_det = sum(len(d.score) for d in dets)
     for metrics in (("bev", "3d"), ("2d", "bev", "3d")):
-        med, times = timeit(lambda: kitti_eval.evaluate(gts, dets, metrics=metrics), repeats)
+        med, times = _timed(lambda: kitti_eval.evaluate(gts, dets, metrics=metrics), repeats)
         res = kitti_eval.evaluate(gts, dets, metrics=metrics)
         print(f"kitti_ap: {n_frames} frames ({n_gt} gt rows, {n_det} detections), metrics {'+'.join(metrics)}, "
               f"IoU 0.7 & 0.5: {med:.2f} s median of {[round(t, 2) for t in times]}; "

@@ -13,8 +13,6 @@ Point sets have `max_points` points (the configured subsampling), drawn around a
 from __future__ import annotations
 
 import argparse
-import statistics
-import time
 from pathlib import Path
 
 import numpy as np
@@ -26,17 +24,9 @@ from redsup.lifting.data import Batch
 from redsup.lifting.frames import to_vehicle
 from redsup.lifting.model import build_model
 from redsup.lifting.pipeline import make_template
+from timing import median_time
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def timeit(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
 
 
 def fake_batch(n: int, p: int, rng: np.random.Generator, pairs: bool = False) -> Batch:
@@ -78,8 +68,8 @@ def main() -> None:
         to_vehicle(out["translation"], model.yaw.decode(out), b.centre, b.azimuth)
 
     infer(big)
-    t_big = timeit(lambda: infer(big), args.repeats)
-    t_one = timeit(lambda: infer(one), max(20, args.repeats * 10))
+    t_big = median_time(lambda: infer(big), args.repeats)
+    t_one = median_time(lambda: infer(one), max(20, args.repeats * 10))
     print(f"inference, batch {args.batch}: {args.batch / t_big:,.0f} objects/s ({t_big * 1e3:.1f} ms per batch)")
     print(f"inference, one object at a time: {1 / t_one:,.0f} objects/s ({t_one * 1e3:.2f} ms latency)")
 
@@ -98,7 +88,7 @@ def main() -> None:
                 opt.step()
 
             step()
-            t = timeit(step, args.repeats)
+            t = median_time(step, args.repeats)
             print(f"training step, batch 64, {k:3d} bins, {'+'.join(terms):20s}: {t * 1e3:7.1f} ms")
 
 

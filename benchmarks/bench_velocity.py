@@ -12,8 +12,6 @@
 from __future__ import annotations
 
 import argparse
-import statistics
-import time
 
 import numpy as np
 import torch
@@ -21,18 +19,10 @@ import torch
 from redsup.velocity import geometry, mlp
 from redsup.velocity.data import TrackSet
 from redsup.velocity.synthetic import fit_statistics, generate_tracks
+from timing import median_time
 
 CAL = geometry.Calibration(fx=714.0, fy=714.0, cx=640.0, cy=360.0, height=1.8)  # TuSimple-like, 1280 x 720
 FPS = 20.0
-
-
-def timeit(fn, repeats: int) -> float:
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        fn()
-        times.append(time.perf_counter() - start)
-    return statistics.median(times)
 
 
 def statistics_for_bench(n: int = 400) -> dict:
@@ -58,20 +48,20 @@ def bench_forward(stats: dict, repeats: int) -> None:
         with torch.no_grad():
             model(torch.from_numpy(mlp.box_features(boxes, CAL, 5.0)))
 
-    print(f"forward, batch of 375: {timeit(batch, 20 * repeats) / 375 * 1000:.4f} ms per track")
-    geo = timeit(lambda: geometry.geometric_velocity(boxes[:1], CAL, FPS, 10), 200 * repeats)
+    print(f"forward, batch of 375: {median_time(batch, 20 * repeats) / 375 * 1000:.4f} ms per track")
+    geo = median_time(lambda: geometry.geometric_velocity(boxes[:1], CAL, FPS, 10), 200 * repeats)
     print(f"geometric baseline, one track: {geo * 1000:.3f} ms")
 
 
 def bench_generate(stats: dict, repeats: int) -> None:
-    s = timeit(lambda: generate_tracks(stats, 11536, np.random.default_rng(2)), repeats)
+    s = median_time(lambda: generate_tracks(stats, 11536, np.random.default_rng(2)), repeats)
     print(f"generator: 11536 tracks in {s:.3f} s ({11536 / s:.0f} tracks/s)")
 
 
 def bench_epoch(stats: dict, repeats: int) -> None:
     gen = generate_tracks(stats, 11536, np.random.default_rng(3))
     feats = mlp.box_features(gen["boxes"], CAL, 5.0)
-    s = timeit(lambda: mlp.train_mlp(feats, gen["velocity"], hidden=70, layers=4, dropout=0.2, lr=6e-4,
+    s = median_time(lambda: mlp.train_mlp(feats, gen["velocity"], hidden=70, layers=4, dropout=0.2, lr=6e-4,
                                      lr_decay=0.99, epochs=1, batch_size=32, seed=0), repeats)
     print(f"one epoch, 11536 tracks, batch 32: {s:.2f} s (150 epochs: {150 * s / 60:.1f} min)")
 

@@ -219,6 +219,7 @@ def test_plan_lists_the_jobs_as_data():
     assert files["pred"] == ["results/depth/predictions/world_x/M/test_000.npz"]
     assert files["gt"] == ["results/prepared/world_x/test_000/cam_front_depth.npz"]
     assert files["road"] == ["results/prepared/world_x/test_000/road.npz"]
+    assert files["raw"] == ["results/raw/world_x/test_000"]
     assert files["train_pred"] == [f"results/depth/predictions/world_x/M/train_00{i}.npz" for i in (0, 1)]
     assert "train_pred" not in plan.eval_inputs(config, scenes, "world_x", "M", "road_L6_W3")
     assert plan.scene_files(config, scenes, "pred", "long") == ["results/depth/predictions/world_x/M/long_000.npz"]
@@ -226,3 +227,23 @@ def test_plan_lists_the_jobs_as_data():
 
     for name in ("gt_median", "single_train", "road_L30_W0.5"):
         assert re.fullmatch(plan.METHOD_PATTERN, name) and methods.parse_method(name)
+
+
+def test_camera_height_comes_from_the_scene_extrinsics(tmp_path):
+    import json
+
+    scene = tmp_path / "test_000"
+    scene.mkdir()
+    T = np.eye(4)
+    T[:3, 3] = (1.2, 0.0, 1.73)  # camera 1.73 m above the vehicle origin on the road
+    (scene / "extrinsics.json").write_text(json.dumps({"cam_front": T.tolist(), "lidar_top": np.eye(4).tolist()}))
+    (scene / "scene.json").write_text(json.dumps({"scene": "test_000", "dataset": "x", "domain": "real",
+                                                  "split": "test", "fps": 10.0, "n_frames": 3,
+                                                  "cameras": ["cam_front"], "lidars": ["lidar_top"], "seed": 0}))
+    assert inputs.camera_geometry(scene, "cam_front") == {"camera_height": pytest.approx(1.73), "fps": 10.0}
+    with pytest.raises(ValueError, match="extrinsics.json.*cam_back"):
+        inputs.camera_geometry(scene, "cam_back")
+    T[2, 3] = -0.1
+    (scene / "extrinsics.json").write_text(json.dumps({"cam_front": T.tolist()}))
+    with pytest.raises(ValueError, match="must be > 0"):
+        inputs.camera_geometry(scene, "cam_front")

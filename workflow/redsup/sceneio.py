@@ -21,18 +21,25 @@ class SceneError(ValueError):
     """A malformed or missing input file; the message names the file."""
 
 
+def read_json(path: str | Path, missing: str = "missing", error: type[SceneError] = SceneError):
+    """The JSON content of `path`; `error` naming the file when it is absent ("<path>: <missing>") or not
+    valid JSON."""
+    path = Path(path)
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError as exc:
+        raise error(f"{path}: {missing}") from exc
+    except json.JSONDecodeError as exc:
+        raise error(f"{path}: not valid JSON: {exc}") from exc
+
+
 def frame_name(index: int, ext: str) -> str:
     return f"{index:06d}.{ext}"
 
 
 def read_meta(scene_dir: str | Path) -> dict:
     path = Path(scene_dir) / "scene.json"
-    try:
-        meta = json.loads(path.read_text())
-    except FileNotFoundError as exc:
-        raise SceneError(f"{path}: missing (every scene folder needs scene.json)") from exc
-    except json.JSONDecodeError as exc:
-        raise SceneError(f"{path}: not valid JSON: {exc}") from exc
+    meta = read_json(path, "missing (every scene folder needs scene.json)")
     for key in ("scene", "n_frames", "fps", "cameras", "lidars"):
         if key not in meta:
             raise SceneError(f"{path}: key '{key}' missing")
@@ -119,12 +126,7 @@ def read_poses(path: str | Path) -> np.ndarray:
 
 def read_extrinsics(path: str | Path) -> dict[str, np.ndarray]:
     path = Path(path)
-    try:
-        data = json.loads(path.read_text())
-    except FileNotFoundError as exc:
-        raise SceneError(f"{path}: sensor extrinsics missing") from exc
-    except json.JSONDecodeError as exc:
-        raise SceneError(f"{path}: not valid JSON: {exc}") from exc
+    data = read_json(path, "sensor extrinsics missing")
     out = {}
     for name, matrix in data.items():
         T = np.asarray(matrix, dtype=np.float64)

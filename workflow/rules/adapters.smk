@@ -1,4 +1,4 @@
-# Real datasets as drop-in inputs (docs/real_datasets.md): KITTI raw, KITTI object and scene-folder datasets
+# Real datasets as drop-in inputs (README.md, "Running on the real datasets"): KITTI raw, KITTI object and scene-folder datasets
 # converted into the canonical raw-scene format where world_scene would have rendered them, and TuSimple
 # velocity splits into the clip folders. Which datasets / clip splits these rules serve is decided by the
 # wildcard constraints built in common.smk from config (kind != world; velocity_clips.source.splits).

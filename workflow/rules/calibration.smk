@@ -66,6 +66,7 @@ rule calibration_fig1:
         pred=calib_plan.scene_files(config, scenes_of(CALIB["dataset"]), "pred", CALIB_SPLIT),
         gt=calib_plan.scene_files(config, scenes_of(CALIB["dataset"]), "gt", CALIB_SPLIT),
         road=calib_plan.scene_files(config, scenes_of(CALIB["dataset"]), "road", CALIB_SPLIT),
+        raw=calib_plan.scene_files(config, scenes_of(CALIB["dataset"]), "raw", CALIB_SPLIT),
         single=f"results/calibration/{CALIB['dataset']}/{CALIB['mode']}/single_train.json",
     output:
         png="results/figures/mccraith_ch5_fig1.png",

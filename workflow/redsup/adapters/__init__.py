@@ -1,6 +1,6 @@
 """Real datasets as drop-in inputs: adapters that convert KITTI raw drives, KITTI object frames and
 scene-folder datasets (Lyft / DDAD / NAP-lab after extraction) into the canonical raw-scene format
-(docs/scene_format.md), and TuSimple velocity splits into the clip folders of the DAG.
+(README.md, "The canonical raw-scene format"), and TuSimple velocity splits into the clip folders of the DAG.
 
 Conversion (rather than reading in place) keeps every downstream rule unchanged: `adapt_scene` writes
 `results/raw/<dataset>/<scene>/` exactly where `world_scene` writes it for the embedded world. Images and

@@ -1,5 +1,5 @@
 """Shared pieces of the dataset adapters: errors, calibration text files, transforms, and a writer that
-builds one canonical scene folder (docs/scene_format.md) in a temporary sibling and renames it at the end.
+builds one canonical scene folder (README.md, "The canonical raw-scene format") in a temporary sibling and renames it at the end.
 """
 from __future__ import annotations
 

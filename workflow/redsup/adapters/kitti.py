@@ -1,6 +1,6 @@
 """KITTI raw drives and KITTI object frames converted into the canonical raw-scene format.
 
-Frames (docs/scene_format.md): `lidar_top` is the Velodyne frame itself (x forward, y left, z up; the
+Frames (README.md, "The canonical raw-scene format"): `lidar_top` is the Velodyne frame itself (x forward, y left, z up; the
 sweeps are KITTI's own records, linked or copied unchanged). The vehicle frame has the axes of the OXTS
 IMU and its origin `imu_height` (KITTI setup: 0.93 m) below the IMU, on the road. Cameras are the
 *rectified* cameras 2 (`cam_front`) and 3 (`cam_front_right`): K = P_rect[:, :3] and the camera frame is

@@ -2,7 +2,7 @@
 PNGs (Cityscapes label ids), turned into the scene's `gt/instance` and `gt/semantic` images.
 
 Layout: one file per image at `<root>/<the image's path relative to the dataset path>` with the
-extension replaced (`.json` for detections, `.png` for semantic labels); see docs/real_datasets.md.
+extension replaced (`.json` for detections, `.png` for semantic labels); see README.md, "Running on the real datasets".
 
 A detection file is the list Detectron2 / MMDetection write in COCO result format for that image:
 ``[{"category_id": int, "score": float, "segmentation": RLE or polygons, "bbox": [x, y, w, h], ...}]``
@@ -11,7 +11,6 @@ counts list, `redsup.adapters.rle`) or polygon lists; their size must be the ima
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import cv2
@@ -19,6 +18,7 @@ import numpy as np
 
 from redsup.adapters import rle
 from redsup.adapters.common import AdapterError
+from redsup.sceneio import read_json
 
 
 def _polygons_to_mask(polygons, size: tuple[int, int]) -> np.ndarray:
@@ -39,12 +39,7 @@ def load_detections(path: str | Path, size: tuple[int, int], categories: dict[in
     size differs from the image's (W, H) = `size`.
     """
     path = Path(path)
-    try:
-        entries = json.loads(path.read_text())
-    except FileNotFoundError as exc:
-        raise AdapterError(f"{path}: detection file missing (one COCO-result JSON per image)") from exc
-    except json.JSONDecodeError as exc:
-        raise AdapterError(f"{path}: not valid JSON: {exc}") from exc
+    entries = read_json(path, "detection file missing (one COCO-result JSON per image)", AdapterError)
     if not isinstance(entries, list):
         raise AdapterError(f"{path}: expected a list of COCO results (category_id, score, segmentation)")
     out = []

@@ -1,6 +1,6 @@
 """Scene-folder datasets (Galteland §3.6.1: Lyft, DDAD, NAP-lab after extraction) into the canonical format.
 
-Input, one folder per scene under `path` (docs/real_datasets.md):
+Input, one folder per scene under `path` (README.md, "Running on the real datasets"):
 
     <scene>/<folder>/<frames>.png|.jpg      images of one camera, in natural name order (frame i of every
                                             camera is the same instant)

@@ -17,6 +17,7 @@ import shutil
 from pathlib import Path
 
 from redsup.adapters.common import AdapterError
+from redsup.sceneio import read_json
 
 NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 
@@ -124,12 +125,7 @@ def adapt_clips(source: dict, split: str, out_dir: str | Path) -> dict:
             ann_path = clip / "annotation.json"
             if not (clip / "imgs").is_dir():
                 raise AdapterError(f"{clip / 'imgs'}: missing")
-            try:
-                annotations = json.loads(ann_path.read_text())
-            except FileNotFoundError as exc:
-                raise AdapterError(f"{ann_path}: missing") from exc
-            except json.JSONDecodeError as exc:
-                raise AdapterError(f"{ann_path}: not valid JSON: {exc}") from exc
+            annotations = read_json(ann_path, error=AdapterError)
             vehicles = _vehicles(annotations, str(ann_path), None if gt is None else gt.get(int(clip.name), []))
             n_vehicles += len(vehicles)
             dst = tmp / "clips" / clip.name

@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from redsup.prep import masks_io
+from redsup.sceneio import read_extrinsics, read_meta
 
 
 @dataclass
@@ -103,3 +104,18 @@ def load_scene(pred_path: str | Path, gt_path: str | Path | None = None, road_pa
         if scene.gt is not None:
             scene.road_gt = crop_resize_nearest(raw, crop, (scene.gt.shape[2], scene.gt.shape[1]))
     return scene
+
+
+def camera_geometry(scene_dir: str | Path, camera: str) -> dict:
+    """{"camera_height": m above the road, "fps": frames per second} of one raw scene: the height is the
+    camera's z in the vehicle frame (whose origin lies on the road, README "The canonical raw-scene
+    format"); ValueError naming the file when the camera is absent or not above the road."""
+    scene_dir = Path(scene_dir)
+    path = scene_dir / "extrinsics.json"
+    extrinsics = read_extrinsics(path)
+    if camera not in extrinsics:
+        raise ValueError(f"{path}: no extrinsics for camera '{camera}' (has {sorted(extrinsics)})")
+    height = float(extrinsics[camera][2, 3])
+    if not np.isfinite(height) or height <= 0:
+        raise ValueError(f"{path}: camera '{camera}' is at z = {height} m; the camera height must be > 0")
+    return {"camera_height": height, "fps": float(read_meta(scene_dir)["fps"])}

@@ -35,7 +35,8 @@ def result_files(cal: Mapping, table: str) -> list[str]:
 
 def scene_files(config: Mapping, scenes: Iterable[str], kind: str, split: str, dataset: str | None = None,
                 mode: str | None = None) -> list[str]:
-    """Prediction (``pred``), LiDAR ground truth (``gt``) or road-mask (``road``) files of the scenes of one
+    """Prediction (``pred``), LiDAR ground truth (``gt``), road-mask (``road``) files or raw scene folders
+    (``raw``: extrinsics, hence the camera height, and fps) of the scenes of one
     split; ``scenes`` = every scene id of the dataset (common.smk ``scenes_of``)."""
     cal = config["calibration"]
     dataset, mode = dataset or cal["dataset"], mode or cal["mode"]
@@ -43,6 +44,7 @@ def scene_files(config: Mapping, scenes: Iterable[str], kind: str, split: str, d
         "pred": "results/depth/predictions/{d}/{m}/{s}.npz",
         "gt": "results/prepared/{d}/{s}/{cam}_depth.npz",
         "road": "results/prepared/{d}/{s}/road.npz",
+        "raw": "results/raw/{d}/{s}",
     }[kind]
     prefix = f"{split}_"
     return [pattern.format(d=dataset, m=mode, s=s, cam=config["detection"]["camera"])
@@ -53,7 +55,7 @@ def eval_inputs(config: Mapping, scenes: Iterable[str], dataset: str, mode: str,
     """Inputs of one ``calibration_eval`` job: the test scenes' predictions, ground truth and road masks, plus
     the training scenes' predictions and ground truth for the training-set single scale."""
     scenes = list(scenes)
-    files = {k: scene_files(config, scenes, k, "test", dataset, mode) for k in ("pred", "gt", "road")}
+    files = {k: scene_files(config, scenes, k, "test", dataset, mode) for k in ("pred", "gt", "road", "raw")}
     if method == "single_train":
         files["train_pred"] = scene_files(config, scenes, "pred", "train", dataset, mode)
         files["train_gt"] = scene_files(config, scenes, "gt", "train", dataset, mode)

@@ -16,7 +16,6 @@ distance (N,) = position z, bin (N,) str near / medium / far, bin_index (N,) int
 """
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import cv2
@@ -25,7 +24,7 @@ from tqdm import tqdm
 
 from redsup.datastats import distance_bin
 from redsup.fileio import save_npz_atomic
-from redsup.sceneio import SceneError
+from redsup.sceneio import SceneError, read_json
 
 BINS = ("near", "medium", "far")
 
@@ -73,12 +72,7 @@ def _frame_path(clip_dir: Path, k: int) -> Path | None:
 def read_annotations(clip_dir: str | Path) -> list[dict]:
     """The annotated vehicles of one clip; SceneError naming annotation.json on bad input."""
     path = Path(clip_dir) / "annotation.json"
-    try:
-        annotations = json.loads(path.read_text())
-    except FileNotFoundError as exc:
-        raise SceneError(f"{path}: missing") from exc
-    except json.JSONDecodeError as exc:
-        raise SceneError(f"{path}: not valid JSON: {exc}") from exc
+    annotations = read_json(path)
     if not isinstance(annotations, list):
         raise SceneError(f"{path}: expected a list of annotated vehicles")
     for a in annotations:
