@@ -1,5 +1,6 @@
 """Test-time adaptation: only the selected modules change, BatchNorm is untouched, resets are explicit."""
 import copy
+import math
 import functools
 
 import pytest
@@ -148,3 +149,36 @@ def test_direct_optimisation_depth_only_keeps_pose():
     assert not torch.equal(optimised["disp_0"], variables["disp_0"])
     with pytest.raises(KeyError, match="nope"):
         adaptation.direct_optimisation(variables, loss_fn, lr=1.0, steps=1, free=["nope"])
+
+
+def test_divergence_keeps_last_finite_weights_and_records_nan():
+    models = _models()
+    sample = _sample(5)
+    calls = []
+
+    def exploding(models_, batch):  # a finite loss at the first step, then +inf (as at lr >= 1)
+        out = LOSS(models_, batch)
+        if len(calls) >= 1:
+            out["loss"] = out["loss"] * float("inf")
+        calls.append(1)
+        return out
+
+    params = adaptation.select_parameters(models, ["depth_encoder"])
+    history = adaptation.adapt(models, exploding, sample, params, lr=0.1, steps=4)
+    assert len(history) == 4 and math.isfinite(history[0]) and all(math.isnan(h) for h in history[1:])
+    after_first = {id(p): p.detach().clone() for p in params}
+    assert all(torch.isfinite(p).all() for p in params)
+    assert len(calls) == 2  # no forward (and no backward) after the divergence
+    # a second call with a finite loss but non-finite gradients leaves the parameters untouched
+    poisoned = functools.partial(_nan_grad_loss, LOSS)
+    adaptation.adapt(models, poisoned, sample, params, lr=0.1, steps=2)
+    assert all(torch.equal(p, after_first[id(p)]) for p in params)
+
+
+def _nan_grad_loss(loss_fn, models_, batch):
+    """The loss plus sqrt(0 * sum(w)): the value stays finite (+0), the gradient is inf * 0 = NaN."""
+    out = loss_fn(models_, batch)
+    w = models_["depth_encoder"].conv1.weight
+    out["loss"] = out["loss"] + torch.sqrt((w * 0.0).sum())
+    assert torch.isfinite(out["loss"])
+    return out

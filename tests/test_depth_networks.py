@@ -134,3 +134,19 @@ def test_stereo_transform_shifts_like_the_baseline():
     grid, _ = warping.sampling_grid(torch.full((1, 1, 32, 64), 10.0), _K(1), T)
     pix_u = ((grid[..., 0] + 1) * 64 - 1) / 2
     assert torch.allclose(pix_u, torch.arange(64.0) - 50.0 * 0.5 / 10.0, atol=1e-4)
+
+
+@pytest.mark.parametrize("init", [0.02, 0.3])
+def test_init_disparity_sets_the_untrained_output(init):
+    torch.manual_seed(0)
+    models = networks.build_models(base_channels=8, init_disparity=init).eval()
+    # zero the last decoder features' weights: the output is then exactly sigmoid(bias)
+    for conv in models["depth_decoder"].dispconv:
+        torch.nn.init.zeros_(conv.weight)
+    with torch.no_grad():
+        disps = pipeline.predict_disparities(models, torch.rand(1, 3, 32, 64))
+    assert all(torch.allclose(d, torch.full_like(d, init), atol=1e-6) for d in disps)
+    _, depth = networks.disp_to_depth(torch.tensor(init), 0.1, 100.0)
+    assert depth.item() == pytest.approx(1.0 / (0.01 + 9.99 * init))
+    with pytest.raises(ValueError, match="init_disparity"):
+        networks.build_models(8, init_disparity=1.0)

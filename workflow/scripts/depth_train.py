@@ -36,7 +36,8 @@ with child_run(sm.log.run, parent, f"train {dataset} {mode}", rule=sm.rule, wild
                                            reversed_order=(cam == "cam_back"), camera=cam,
                                            stereo_baseline=cfg["train"]["stereo_baseline"]))
     torch.manual_seed(seed)
-    models = networks.build_models(cfg["model"]["base_channels"], cfg["model"]["num_scales"]).to(device)
+    models = networks.build_models(cfg["model"]["base_channels"], cfg["model"]["num_scales"],
+                                   cfg["model"].get("init_disparity")).to(device)
     every = int(cfg["train"]["log_every"])
 
     def log_step(step, terms):

@@ -127,6 +127,11 @@ def adapt(models: Models, loss_fn: LossFn, batch, params: Sequence[nn.Parameter]
     called with step 0 (loss None) before the first update and after update k with the loss it minimised and
     the adaptation time so far (callback time excluded), e.g. to evaluate ch. 4 Table 3's checkpoints along
     one trajectory.
+
+    Divergence (a too high learning rate): once the loss or a gradient is not finite the parameters stay at the
+    last finite iterate and every remaining step records a NaN loss, so the trajectory keeps its length, the
+    prediction stays finite and no backward pass runs on non-finite values (torch 2.13's CPU grid-sampler
+    backward can crash on them).
     """
     all_params = [p for m in models.values() for p in m.parameters()]
     flags = [p.requires_grad for p in all_params]
@@ -143,14 +148,20 @@ def adapt(models: Models, loss_fn: LossFn, batch, params: Sequence[nn.Parameter]
         if callback is not None:
             callback(0, None, 0.0)
         elapsed = 0.0
+        diverged = False
         for step in range(1, steps + 1):
             start = time.perf_counter()
-            loss = loss_fn(models, batch)["loss"]
-            if optimizer is not None and loss.requires_grad:
+            loss = loss_fn(models, batch)["loss"] if not diverged else None
+            if loss is not None and not bool(torch.isfinite(loss)):
+                diverged = True
+            if not diverged and optimizer is not None and loss.requires_grad:
                 optimizer.zero_grad(set_to_none=True)
                 loss.backward()
-                optimizer.step()
-            history.append(float(loss.detach()))
+                if all(p.grad is None or bool(torch.isfinite(p.grad).all()) for p in params):
+                    optimizer.step()
+                else:
+                    diverged = True
+            history.append(float("nan") if diverged or loss is None else float(loss.detach()))
             elapsed += time.perf_counter() - start
             if callback is not None:
                 callback(step, history[-1], elapsed)
@@ -228,7 +239,8 @@ def direct_optimisation(variables: Mapping[str, torch.Tensor],
     ``variables`` (e.g. ``pipeline.output_variables``) are copied, never modified; ``loss_fn(vars)["loss"]``
     is minimised over the variables named in ``free`` (default: all; e.g. only the ``disp_*`` maps for the
     "depth only" variant of §4.3); ``project`` (e.g. ``pipeline.clamp_disparities``) is applied after every
-    step. Returns the optimised copies (detached) and the loss history.
+    step. Returns the optimised copies (detached) and the loss history. Divergence is handled as in ``adapt``:
+    the variables stay at the last finite iterate and the remaining steps record NaN losses.
     """
     free_set = set(variables) if free is None else set(free)
     unknown = free_set - set(variables)
@@ -239,17 +251,24 @@ def direct_optimisation(variables: Mapping[str, torch.Tensor],
     if callback is not None:
         callback(0, None, 0.0)
     elapsed = 0.0
+    diverged = False
     for step in range(1, steps + 1):
         start = time.perf_counter()
-        leaves = {k: v.detach().requires_grad_(k in free_set) for k, v in current.items()}
-        loss = loss_fn(leaves)["loss"]
-        names = [k for k in leaves if k in free_set]
-        grads = dict(zip(names, torch.autograd.grad(loss, [leaves[k] for k in names], allow_unused=True)))
-        with torch.no_grad():
-            current = {k: (v - lr * grads[k] if grads.get(k) is not None else v).detach() for k, v in leaves.items()}
-            if project is not None:
-                current = {k: v.detach() for k, v in project(current).items()}
-        history.append(float(loss.detach()))
+        if not diverged:
+            leaves = {k: v.detach().requires_grad_(k in free_set) for k, v in current.items()}
+            loss = loss_fn(leaves)["loss"]
+            diverged = not bool(torch.isfinite(loss))
+        if not diverged:
+            names = [k for k in leaves if k in free_set]
+            grads = dict(zip(names, torch.autograd.grad(loss, [leaves[k] for k in names], allow_unused=True)))
+            diverged = not all(g is None or bool(torch.isfinite(g).all()) for g in grads.values())
+        if not diverged:
+            with torch.no_grad():
+                current = {k: (v - lr * grads[k] if grads.get(k) is not None else v).detach()
+                           for k, v in leaves.items()}
+                if project is not None:
+                    current = {k: v.detach() for k, v in project(current).items()}
+        history.append(float("nan") if diverged else float(loss.detach()))
         elapsed += time.perf_counter() - start
         if callback is not None:
             callback(step, history[-1], elapsed)

@@ -18,6 +18,8 @@ and ``encoder.last_block`` (layer4).
 """
 from __future__ import annotations
 
+import math
+
 import torch
 import torch.nn.functional as F
 from torch import nn
@@ -117,7 +119,10 @@ def decoder_channels(base_channels: int) -> tuple[int, ...]:
 class DepthDecoder(nn.Module):
     """U-Net decoder with skip connections; ``forward`` returns [disp_0, ..., disp_{n-1}] (scale s: H / 2^s)."""
 
-    def __init__(self, num_ch_enc: tuple[int, ...], num_ch_dec: tuple[int, ...] | None = None, num_scales: int = 4):
+    def __init__(self, num_ch_enc: tuple[int, ...], num_ch_dec: tuple[int, ...] | None = None, num_scales: int = 4,
+                 init_disparity: float | None = None):
+        """``init_disparity`` in (0, 1): the sigmoid output of an untrained network, set through the bias of
+        the disparity convolutions (None: zero bias, 0.5 as Monodepth2)."""
         super().__init__()
         self.num_ch_enc = tuple(num_ch_enc)
         self.num_ch_dec = tuple(num_ch_dec) if num_ch_dec is not None else decoder_channels(num_ch_enc[0])
@@ -130,6 +135,11 @@ class DepthDecoder(nn.Module):
             in1 = self.num_ch_dec[i] + (self.num_ch_enc[i - 1] if i > 0 else 0)
             self.upconv1.append(ConvBlock(in1, self.num_ch_dec[i]))
         self.dispconv = nn.ModuleList([nn.Conv2d(self.num_ch_dec[s], 1, 3) for s in range(num_scales)])
+        if init_disparity is not None:
+            if not 0.0 < init_disparity < 1.0:
+                raise ValueError(f"init_disparity must lie in (0, 1), got {init_disparity}")
+            for conv in self.dispconv:
+                nn.init.constant_(conv.bias, math.log(init_disparity / (1.0 - init_disparity)))
 
     def forward(self, features: list[torch.Tensor], output_size: tuple[int, int] | None = None) -> list[torch.Tensor]:
         """``output_size`` (H, W) of the input image; default twice the first feature map."""
@@ -168,13 +178,14 @@ class PoseDecoder(nn.Module):
         return out[:, :3], out[:, 3:]
 
 
-def build_models(base_channels: int = 64, num_scales: int = 4) -> nn.ModuleDict:
-    """The four sub-networks of ch. 4 Fig. 2, keyed by ``MODULE_NAMES``; random initialisation."""
+def build_models(base_channels: int = 64, num_scales: int = 4, init_disparity: float | None = None) -> nn.ModuleDict:
+    """The four sub-networks of ch. 4 Fig. 2, keyed by ``MODULE_NAMES``; random initialisation
+    (``init_disparity``: see ``DepthDecoder``)."""
     depth_encoder = ResNetEncoder(3, base_channels)
     pose_encoder = ResNetEncoder(6, base_channels)
     return nn.ModuleDict({
         "depth_encoder": depth_encoder,
-        "depth_decoder": DepthDecoder(depth_encoder.num_ch_enc, num_scales=num_scales),
+        "depth_decoder": DepthDecoder(depth_encoder.num_ch_enc, num_scales=num_scales, init_disparity=init_disparity),
         "pose_encoder": pose_encoder,
         "pose_decoder": PoseDecoder(pose_encoder.num_ch_enc),
     })
