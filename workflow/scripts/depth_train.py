@@ -20,9 +20,10 @@ mode_cfg = cfg["modes"][mode]
 sources = list(mode_cfg["sources"])
 device = cfg["device"] if cfg["device"] != "auto" else ("cuda" if torch.cuda.is_available() else "cpu")
 seed = int(sm.config["seed"]) + zlib.crc32(f"{dataset}/{mode}".encode()) % 100000
+init_disparity = mode_cfg.get("init_disparity", cfg["model"].get("init_disparity"))
 steps = next((m.get("steps") for m in cfg["models"] if m["dataset"] == dataset and m["mode"] == mode), None)  # override
 params = {"dataset": dataset, "mode": mode, "sources": sources, "cameras": mode_cfg["cameras"], "seed": seed,
-          "device": device, "model": cfg["model"], "loss": cfg["loss"],
+          "device": device, "model": {**cfg["model"], "init_disparity": init_disparity}, "loss": cfg["loss"],
           "train": {**cfg["train"], **({"steps": steps} if steps else {})}}
 
 parent = model_parent(cfg, f"{dataset}/{mode}")
@@ -36,8 +37,7 @@ with child_run(sm.log.run, parent, f"train {dataset} {mode}", rule=sm.rule, wild
                                            reversed_order=(cam == "cam_back"), camera=cam,
                                            stereo_baseline=cfg["train"]["stereo_baseline"]))
     torch.manual_seed(seed)
-    models = networks.build_models(cfg["model"]["base_channels"], cfg["model"]["num_scales"],
-                                   cfg["model"].get("init_disparity")).to(device)
+    models = networks.build_models(cfg["model"]["base_channels"], cfg["model"]["num_scales"], init_disparity).to(device)
     every = int(cfg["train"]["log_every"])
 
     def log_step(step, terms):
