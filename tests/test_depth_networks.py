@@ -150,3 +150,16 @@ def test_init_disparity_sets_the_untrained_output(init):
     assert depth.item() == pytest.approx(1.0 / (0.01 + 9.99 * init))
     with pytest.raises(ValueError, match="init_disparity"):
         networks.build_models(8, init_disparity=1.0)
+
+
+def test_warp_with_huge_coordinates_is_finite_and_matches_the_border():
+    """A diverged pose (translation 1e30) sends every pixel far outside: the warp is the border colour and the
+    backward pass is finite (the unclamped CPU grid sampler crashed on such coordinates)."""
+    image = torch.rand(1, 3, 8, 16, requires_grad=True)
+    depth = torch.full((1, 1, 8, 16), 5.0, requires_grad=True)
+    K = _K(1, f=10.0, w=16, h=8)
+    out = warping.warp(image, depth, K, _shift_T(1e30))
+    out.sum().backward()
+    assert torch.allclose(out[0], image[0, :, :, -1:].detach().expand(3, 8, 16))  # x -> +inf: the right border
+    assert torch.isfinite(image.grad).all() and torch.isfinite(depth.grad).all()
+    assert depth.grad.abs().max() < 1e-5  # nothing to learn from a view that lies entirely off the image

@@ -66,8 +66,13 @@ def sampling_grid(depth: torch.Tensor, K: torch.Tensor, T: torch.Tensor) -> tupl
 
 def warp(image: torch.Tensor, depth: torch.Tensor, K: torch.Tensor, T: torch.Tensor) -> torch.Tensor:
     """Synthesise the target view from source ``image`` (B, C, H, W), target ``depth`` (B, 1, H, W), ``T``
-    target->source. Bilinear sampling, border padding."""
+    target->source. Bilinear sampling, border padding.
+
+    The grid is clamped to [-2, 2] (NaN -> 2) before sampling. With border padding this changes neither the
+    samples nor their gradients (both are clipped to the border beyond +-1), but it keeps huge coordinates
+    away from torch 2.13's CPU grid-sampler backward, which crashes (SIGSEGV) on them after a diverging step."""
     grid, _ = sampling_grid(depth, K, T)
+    grid = torch.nan_to_num(grid, nan=2.0).clamp(-2.0, 2.0)
     return F.grid_sample(image, grid, mode="bilinear", padding_mode="border", align_corners=False)
 
 
