@@ -23,8 +23,9 @@ def build_once(profile: str, cores: int, targets: list[str]) -> float:
     with tempfile.TemporaryDirectory(prefix=f"bench_{profile}_") as workdir:
         start = time.perf_counter()
         subprocess.run([sys.executable, "-m", "snakemake", "--snakefile", str(ROOT / "Snakefile"),
-                        "--directory", workdir, "--cores", str(cores), "--config", f"profile={profile}",
-                        *targets], check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                        "--directory", workdir, "--cores", str(cores), *targets,
+                        "--config", f"profile={profile}"],  # --config takes every word after it: targets first
+                       check=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         return time.perf_counter() - start
 
 
