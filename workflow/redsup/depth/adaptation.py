@@ -117,6 +117,11 @@ def load_snapshot(models: Models, state: Snapshot) -> None:
         m.load_state_dict(state[name])
 
 
+def _finite(tensors: Iterable[torch.Tensor | None]) -> bool:
+    """Every given tensor (None: no gradient, skipped) is finite everywhere."""
+    return all(t is None or bool(torch.isfinite(t).all()) for t in tensors)
+
+
 def adapt(models: Models, loss_fn: LossFn, batch, params: Sequence[nn.Parameter], lr: float, steps: int,
           callback: Callback | None = None) -> list[float]:
     """``steps`` vanilla-SGD updates of ``params`` on ``loss_fn(models, batch)["loss"]``; returns the losses.
@@ -151,17 +156,16 @@ def adapt(models: Models, loss_fn: LossFn, batch, params: Sequence[nn.Parameter]
         diverged = False
         for step in range(1, steps + 1):
             start = time.perf_counter()
-            loss = loss_fn(models, batch)["loss"] if not diverged else None
-            if loss is not None and not bool(torch.isfinite(loss)):
-                diverged = True
-            if not diverged and optimizer is not None and loss.requires_grad:
-                optimizer.zero_grad(set_to_none=True)
-                loss.backward()
-                if all(p.grad is None or bool(torch.isfinite(p.grad).all()) for p in params):
-                    optimizer.step()
-                else:
-                    diverged = True
-            history.append(float("nan") if diverged or loss is None else float(loss.detach()))
+            if not diverged:
+                loss = loss_fn(models, batch)["loss"]
+                diverged = not _finite([loss])
+                if not diverged and optimizer is not None and loss.requires_grad:
+                    optimizer.zero_grad(set_to_none=True)
+                    loss.backward()
+                    diverged = not _finite(p.grad for p in params)
+                    if not diverged:
+                        optimizer.step()
+            history.append(float("nan") if diverged else float(loss.detach()))
             elapsed += time.perf_counter() - start
             if callback is not None:
                 callback(step, history[-1], elapsed)
@@ -257,11 +261,11 @@ def direct_optimisation(variables: Mapping[str, torch.Tensor],
         if not diverged:
             leaves = {k: v.detach().requires_grad_(k in free_set) for k, v in current.items()}
             loss = loss_fn(leaves)["loss"]
-            diverged = not bool(torch.isfinite(loss))
+            diverged = not _finite([loss])
         if not diverged:
             names = [k for k in leaves if k in free_set]
             grads = dict(zip(names, torch.autograd.grad(loss, [leaves[k] for k in names], allow_unused=True)))
-            diverged = not all(g is None or bool(torch.isfinite(g).all()) for g in grads.values())
+            diverged = not _finite(grads.values())
         if not diverged:
             with torch.no_grad():
                 current = {k: (v - lr * grads[k] if grads.get(k) is not None else v).detach()
