@@ -1,5 +1,4 @@
 # Depth scale from the camera height: per-frame road-plane fit (McCraith ch. 5).
-# Appends its ids to TABLE_IDS / FIGURE_IDS (see common.smk).
 #
 # calibration_eval   results/calibration/{dataset}/{mode}/{method}.json   one scaling method / road box (a child run)
 # calibration_table  results/tables/mccraith_ch5_table{1..4}.{md,csv,tex,score.json}
@@ -8,8 +7,6 @@
 # config calibration.lengths / widths expanded by redsup.calib.plan.table_methods.
 import redsup.calib.plan as calib_plan
 
-TABLE_IDS += [calib_plan.FIGURE, *calib_plan.TABLES]
-FIGURE_IDS += [calib_plan.FIGURE]
 
 CALIB = config["calibration"]
 CALIB_SPLIT = CALIB["figure_split"]

@@ -1,5 +1,4 @@
 # Self-supervised depth, test-time instance adaptation, Galteland's tables (McCraith ch. 4).
-# Appends its ids to TABLE_IDS / FIGURE_IDS (see common.smk).
 #
 # train_depth    results/depth/models/{dataset}/{mode}.pt           one model (M, S, MS, M_frontback, ...)
 # predict_depth  results/depth/predictions/{dataset}/{mode}/{scene}.npz   raw network depth of every frame
@@ -14,8 +13,6 @@ import redsup.depth.configs as depth_configs
 
 DEPTH = config["depth"]
 DEPTH_TABLE_IDS = [t for t in depth_configs.TABLES if t not in depth_configs.FIGURES]
-TABLE_IDS += list(depth_configs.TABLES)
-FIGURE_IDS += list(depth_configs.FIGURES)
 
 DEPTH_AVAILABLE, DEPTH_CAMERAS = depth_configs.availability(config)  # as scenes_of / cameras_of count them
 DEPTH_ROWS = depth_configs.table_rows(DEPTH, DEPTH_AVAILABLE, DEPTH_CAMERAS)

@@ -1,6 +1,4 @@
 # LiDAR-only detector trained from 2D detections, SIC loss, multi-cell voting (McCraith ch. 7).
-# Appends its ids to TABLE_IDS / FIGURE_IDS (see common.smk).
-TABLE_IDS += ["mccraith_ch7_table1", "mccraith_ch7_table2", "mccraith_ch7_table3"]
 
 import redsup.lidar_detector.dag as ld_dag
 

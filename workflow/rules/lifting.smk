@@ -1,5 +1,4 @@
 # Lifting 2D masks to 3D boxes with outlier-aware loss and yaw bins (McCraith ch. 6).
-# Appends its ids to TABLE_IDS / FIGURE_IDS (see common.smk).
 #
 # lifting_run     results/lifting/{metrics,info}/{run}.json + models/{run}.pt   one configuration (a child run):
 #                 train on the train + long scenes, lift and evaluate the test scenes
@@ -9,7 +8,6 @@
 # computed by redsup.lifting.plan.
 import redsup.lifting.plan as lift_plan
 
-TABLE_IDS += list(lift_plan.TABLES)
 
 LIFT = config["lifting"]
 LIFT_RUNS = list(LIFT["runs"])

@@ -1,7 +1,4 @@
 # Velocity from tracked boxes and synthetic box tracks (McCraith ch. 3).
-# Appends its ids to TABLE_IDS / FIGURE_IDS (see common.smk).
-TABLE_IDS += ["mccraith_ch3_table2", "mccraith_ch3_synthetic_ablation", "mccraith_ch3_fig3", "mccraith_ch3_fig6"]
-FIGURE_IDS += ["mccraith_ch3_fig3", "mccraith_ch3_fig6"]
 
 # the configurations (config velocity.configurations) as data: one job and one child run each
 VELOCITY_CONFIGS = {c["name"]: c for c in config["velocity"]["configurations"]}

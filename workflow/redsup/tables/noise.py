@@ -1,0 +1,146 @@
+"""Measured noise of a table cell, and the verdict of a comparison beyond it.
+
+A cell of ours may carry a ``Noise`` record (JSON-able dict):
+
+- ``{"kind": "seeds", "values": [v_seed0, v_seed1, ...]}``: the same configuration trained with different
+  seeds; the cell's value is their mean, its spread their standard deviation.
+- ``{"kind": "bootstrap", "values": [r_1, ..., r_B], "units": DIGEST}``: the metric recomputed on B
+  resamples (with replacement) of the evaluation units (frames, objects, tracks). The resample indices are
+  a function of the sorted unit ids only (``resample_indices``), so two rows evaluated on the same units
+  (same ``units`` digest) share their resamples and their replicate differences form a *paired* bootstrap.
+
+``difference_interval(a, b)`` is the 95 % interval of ``a - b``: paired bootstrap quantiles when both are
+bootstrap records on the same units, otherwise a Welch-style normal / t interval from the two variances
+(seed std² / n, bootstrap variance). Without any noise record the interval is the point difference.
+"""
+from __future__ import annotations
+
+import hashlib
+import math
+from collections.abc import Callable, Mapping, Sequence
+
+import numpy as np
+
+N_BOOTSTRAP = 200
+LEVEL = 0.95
+# two-sided 97.5 % quantiles of Student's t by degrees of freedom (Welch); beyond 30: normal
+_T975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262,
+         10: 2.228, 12: 2.179, 15: 2.131, 20: 2.086, 30: 2.042}
+
+
+def units_digest(unit_ids: Sequence) -> str:
+    """Identity of a set of evaluation units (order-free)."""
+    h = hashlib.sha1("\n".join(sorted(str(u) for u in unit_ids)).encode())
+    return h.hexdigest()[:16]
+
+
+def resample_indices(unit_ids: Sequence, n: int = N_BOOTSTRAP) -> tuple[np.ndarray, list]:
+    """(B x N indices into the *sorted* unit ids, the sorted ids): the same for every row on the same units."""
+    ids = sorted(str(u) for u in unit_ids)
+    seed = int(units_digest(ids), 16) % (2 ** 32)
+    rng = np.random.default_rng(seed)
+    return rng.integers(0, len(ids), size=(n, len(ids))), ids
+
+
+def bootstrap(per_unit: Mapping | None = None, *, unit_ids: Sequence | None = None,
+              statistic: Callable[[list], float] | None = None, n: int = N_BOOTSTRAP) -> dict:
+    """Bootstrap record of one cell.
+
+    Either ``per_unit`` = {unit id: value} (the cell is their mean, e.g. Monodepth2's per-frame average),
+    or ``unit_ids`` with ``statistic(list of unit ids) -> value`` (e.g. AP recomputed on a multiset of
+    frames). Units with a non-finite value count as they are (a mean over them is NaN: the caller decides
+    a fallback before, never drops them silently).
+    """
+    if per_unit is not None:
+        idx, ids = resample_indices(list(per_unit), n)
+        by_id = {str(k): float(v) for k, v in per_unit.items()}
+        vals = np.array([by_id[i] for i in ids])
+        reps = vals[idx].mean(axis=1)
+    elif unit_ids is not None and statistic is not None:
+        idx, ids = resample_indices(unit_ids, n)
+        reps = np.array([float(statistic([ids[i] for i in row])) for row in idx])
+        per_unit = {u: None for u in ids}
+    else:
+        raise ValueError("bootstrap: give per_unit, or unit_ids and statistic")
+    return {"kind": "bootstrap", "values": [float(r) for r in reps], "units": units_digest(list(per_unit))}
+
+
+def seeds(values: Sequence[float]) -> dict:
+    """Seed record of one cell (one value per training seed)."""
+    return {"kind": "seeds", "values": [float(v) for v in values]}
+
+
+def center(noise: Mapping) -> float:
+    """The cell value a record stands for: the seed mean (a bootstrap record's centre is the caller's
+    full-sample value, so this is only used for seeds)."""
+    return float(np.mean(noise["values"]))
+
+
+def spread(noise: Mapping | None) -> float | None:
+    """Standard deviation shown beside a cell: over seeds, or of the bootstrap replicates (standard error)."""
+    if not noise or len(noise.get("values", ())) < 2:
+        return None
+    v = np.asarray(noise["values"], dtype=float)
+    if not np.all(np.isfinite(v)):
+        return math.nan
+    return float(np.std(v, ddof=1))
+
+
+def _var_of_mean(noise: Mapping | None) -> tuple[float, int | None]:
+    """(variance of the cell value, degrees of freedom or None for 'large')."""
+    if not noise or len(noise.get("values", ())) < 2:
+        return 0.0, None
+    v = np.asarray(noise["values"], dtype=float)
+    if noise["kind"] == "seeds":
+        return float(np.var(v, ddof=1)) / len(v), len(v) - 1
+    return float(np.var(v, ddof=1)), None
+
+
+def t975(df: float | None) -> float:
+    if df is None or df > 30:
+        return 1.96
+    keys = sorted(_T975)
+    k = max([x for x in keys if x <= max(1.0, df)] or [1])
+    return _T975[k]
+
+
+def difference_interval(a: float, b: float, noise_a: Mapping | None = None,
+                        noise_b: Mapping | None = None) -> tuple[float, float, str]:
+    """(low, high, method) of the 95 % interval of ``a - b``."""
+    d = a - b
+    if not (math.isfinite(a) and math.isfinite(b)):
+        return math.nan, math.nan, "non-finite"
+    if (noise_a and noise_b and noise_a["kind"] == noise_b["kind"] == "bootstrap"
+            and noise_a.get("units") == noise_b.get("units")
+            and len(noise_a["values"]) == len(noise_b["values"])):
+        diff = np.asarray(noise_a["values"], float) - np.asarray(noise_b["values"], float)
+        if not np.all(np.isfinite(diff)):
+            return math.nan, math.nan, "non-finite"
+        # basic (pivot-free) percentile interval of the paired replicate differences, centred on d
+        lo, hi = np.quantile(diff - diff.mean(), [(1 - LEVEL) / 2, (1 + LEVEL) / 2])
+        return d + float(lo), d + float(hi), "paired bootstrap"
+    va, dfa = _var_of_mean(noise_a)
+    vb, dfb = _var_of_mean(noise_b)
+    if va == 0.0 and vb == 0.0:
+        has = bool(noise_a) or bool(noise_b)
+        return d, d, "seeds/bootstrap without spread" if has else "single values"
+    # Welch-Satterthwaite degrees of freedom (bootstrap sides count as large samples)
+    parts = [(va, dfa), (vb, dfb)]
+    num = (va + vb) ** 2
+    den = sum(v ** 2 / df for v, df in parts if v > 0 and df)
+    df = num / den if den > 0 else None
+    half = t975(df) * math.sqrt(va + vb)
+    methods = sorted({n["kind"] for n in (noise_a, noise_b) if n})
+    return d - half, d + half, "+".join(methods) + " (unpaired)"
+
+
+def verdict_of_interval(lo: float, hi: float) -> str | None:
+    """'reproduces' when the whole interval of (claimed-better margin) is > 0, 'contradicted' when it is
+    < 0, 'inconclusive' when it contains 0 (ties included), None when undefined."""
+    if math.isnan(lo) or math.isnan(hi):
+        return None
+    if lo > 0:
+        return "reproduces"
+    if hi < 0:
+        return "contradicted"
+    return "inconclusive"
