@@ -1,7 +1,14 @@
 """Kendall's tau of our row ordering vs the paper's, and the thesis' claims checked on a table.
 
-Check types (see data/tables.yaml): order, best, close, range. A claim holds when all its checks hold,
-fails when one fails, and is n/a (None) otherwise (a cell it needs is missing or it has no check).
+Check types (see data/tables.yaml): order, best, close, range. Every check is decided on the 95 % interval
+of its margin, from the measured noise of the cells (redsup.tables.noise: seeds or a paired bootstrap):
+``reproduces`` when the whole interval is on the claimed side, ``contradicted`` when it is wholly on the
+other side, ``inconclusive`` when it contains zero (a tie is never a win) or a cell is missing.
+
+A claim's verdict is one of VERDICTS: the three above, plus ``not testable`` (the claim is about prior work
+whose rows have no value of ours, a property of real data, or a claim the thesis' own table contradicts:
+``paper_inconsistent``) and ``data description`` (it holds by how the data were configured) — neither of
+the last two is counted as a result.
 """
 from __future__ import annotations
 
@@ -10,8 +17,14 @@ from collections.abc import Mapping, Sequence
 
 import pandas as pd
 
+from redsup.tables import noise as noise_lib
 from redsup.tables.registry import (CHECK_TYPES, align, as_frame, column_key, load_registry, numeric,
-                                    paper_directions, paper_table, row_key, table_info)
+                                    paper_directions, paper_table, paper_values, row_key, table_info)
+
+REPRODUCES, INCONCLUSIVE, CONTRADICTED = "reproduces", "inconclusive", "contradicted"
+NOT_TESTABLE, DATA_DESCRIPTION = "not testable", "data description"
+VERDICTS = (REPRODUCES, INCONCLUSIVE, CONTRADICTED, NOT_TESTABLE, DATA_DESCRIPTION)
+CATEGORIES = {"not_testable": NOT_TESTABLE, "data_description": DATA_DESCRIPTION}
 
 
 # ------------------------------------------------------------------------------------ Kendall tau
@@ -66,13 +79,17 @@ def _fmt(v: float) -> str:
 
 
 class _Cells:
-    """Numeric lookup in one table with lenient row / column matching."""
+    """Numeric lookup in one table with lenient row / column matching, with each cell's noise record."""
 
-    def __init__(self, table: pd.DataFrame, directions: Mapping[str, bool]):
+    def __init__(self, table: pd.DataFrame, directions: Mapping[str, bool], noise: Mapping | None = None,
+                 literature: Sequence[str] = ()):
         self.table = numeric(table)
         self.rows = {row_key(r): r for r in self.table.index}
         self.cols = {column_key(c): c for c in self.table.columns}
         self.directions = {column_key(c): v for c, v in directions.items()}
+        self.noise = {(row_key(r), column_key(c)): rec for r, cols in (noise or {}).items()
+                      for c, rec in cols.items() if rec}
+        self.literature = {row_key(r) for r in literature}
 
     def get(self, row, metric) -> float | None:
         r, c = self.rows.get(row_key(row)), self.cols.get(column_key(metric))
@@ -80,6 +97,13 @@ class _Cells:
             return None
         v = self.table.at[r, c]
         return None if pd.isna(v) else float(v)
+
+    def noise_of(self, row, metric) -> dict | None:
+        return self.noise.get((row_key(row), column_key(metric)))
+
+    def is_literature(self, row) -> bool:
+        """A paper row with no value of ours at all (prior work / reference): claims on it are not testable."""
+        return row_key(row) in self.literature and row_key(row) not in self.rows
 
     def lower_is_better(self, metric: str, check: Mapping) -> bool:
         if "direction" in check:
@@ -116,13 +140,53 @@ def _metrics(check: Mapping, headline: str | None) -> list[str | None]:
     return list(m) if isinstance(m, (list, tuple)) else [m]
 
 
-def evaluate_check(check: Mapping, cells: _Cells, headline: str | None) -> tuple[bool | None, str]:
-    """(holds, evidence) of one check on one table."""
+def _rows_of(check: Mapping, metric) -> list[str]:
+    kind = check.get("type")
+    if kind == "order":
+        return [_side(check["better"], metric)[0], _side(check["worse"], metric)[0]]
+    if kind == "best":
+        return [check["row"], *(check.get("among") or [])]
+    if kind == "close":
+        return [check["a"], check["b"]]
+    return [check["row"]]
+
+
+def _ival(lo: float, hi: float) -> str:
+    return f"[{_fmt(lo)}, {_fmt(hi)}]"
+
+
+def _beats(cells: _Cells, a: tuple[str, str, float], b: tuple[str, str, float], lower: bool):
+    """(verdict, interval text) of 'a beats b': the 95 % interval of the margin by which it does."""
+    (ar, am, av), (br, bm, bv) = a, b
+    lo, hi, how = noise_lib.difference_interval(av, bv, cells.noise_of(ar, am), cells.noise_of(br, bm))
+    if lower:  # margin = b - a
+        lo, hi = -hi, -lo
+    verdict = noise_lib.verdict_of_interval(lo, hi) or INCONCLUSIVE
+    return verdict, lo, hi, how
+
+
+def _value_interval(cells: _Cells, row: str, metric: str, v: float) -> tuple[float, float]:
+    rec = cells.noise_of(row, metric)
+    if not rec:
+        return v, v
+    lo, hi, _ = noise_lib.difference_interval(v, 0.0, rec, None)
+    return lo, hi
+
+
+def evaluate_check(check: Mapping, cells: _Cells, headline: str | None) -> tuple[str, str]:
+    """(verdict, evidence) of one check on one table: reproduces / inconclusive / contradicted, or not
+    testable when it needs a literature row that has no value of ours."""
     kind = check.get("type")
     if kind not in CHECK_TYPES:
         raise ValueError(f"unknown check type {kind!r} (known: {CHECK_TYPES})")
-    results: list[tuple[bool | None, str]] = []
+    results: list[tuple[str, str]] = []
     for metric in _metrics(check, headline):
+        prefix = "" if metric is None else f"{metric}: "
+        lit = [r for r in _rows_of(check, metric) if cells.is_literature(r)]
+        if lit:
+            results.append((NOT_TESTABLE, f"{prefix}needs {', '.join(lit)} (prior work / reference, no value of "
+                                          "ours: cannot be tested on the embedded world)"))
+            continue
         if kind == "order":
             (br, bm), (wr, wm) = _side(check["better"], metric), _side(check["worse"], metric)
             b, w = cells.get(br, bm), cells.get(wr, wm)
@@ -130,16 +194,14 @@ def evaluate_check(check: Mapping, cells: _Cells, headline: str | None) -> tuple
             cellwise = bm != metric or wm != metric
             label = f"{br} [{bm}]" if cellwise else br
             wlabel = f"{wr} [{wm}]" if cellwise else wr
-            prefix = "" if metric is None else f"{metric}: "
             if b is None or w is None:
                 missing = [x for x, v in ((label, b), (wlabel, w)) if v is None]
-                results.append((None, f"{prefix}missing {', '.join(missing)}"))
+                results.append((INCONCLUSIVE, f"{prefix}missing {', '.join(missing)}"))
                 continue
-            ok = b < w if lower else b > w
-            rel = ("<" if b < w else ">" if b > w else "=")
-            how = (f"expected {'lower' if lower else 'higher'}" if "direction" in check
-                   else f"{'lower' if lower else 'higher'} is better")
-            results.append((ok, f"{prefix}{label} {_fmt(b)} {rel} {wlabel} {_fmt(w)} ({how})"))
+            verdict, lo, hi, how = _beats(cells, (br, bm, b), (wr, wm, w), lower)
+            rel = "<" if b < w else ">" if b > w else "="
+            results.append((verdict, f"{prefix}{label} {_fmt(b)} {rel} {wlabel} {_fmt(w)} "
+                                     f"({'lower' if lower else 'higher'} is better; margin 95 % {_ival(lo, hi)}, {how})"))
         elif kind == "best":
             row, worst = check["row"], bool(check.get("worst", False))
             lower = cells.lower_is_better(metric, check) != worst  # the "winning" direction
@@ -148,96 +210,154 @@ def evaluate_check(check: Mapping, cells: _Cells, headline: str | None) -> tuple
             if among is not None:
                 keys = {row_key(a) for a in among} | {row_key(row)}
                 pool = [r for r in pool if row_key(r) in keys]
+                absent = [a for a in among if row_key(a) not in {row_key(r) for r in pool}]
+            else:
+                absent = []
             v = cells.get(row, metric)
-            if v is None:
-                results.append((None, f"{metric}: missing {row}"))
-                continue
-            if len(pool) < 2:
-                results.append((None, f"{metric}: fewer than two rows to compare"))
-                continue
-            vals = {r: cells.get(r, metric) for r in pool}
-            winner = min(vals, key=vals.get) if lower else max(vals, key=vals.get)
-            ok = vals[winner] == v
             word = "worst" if worst else "best"
-            ev = f"{metric}: {row} {_fmt(v)}; {word} of {len(pool)} rows"
-            ev += "" if ok else f" is {winner} {_fmt(vals[winner])}"
-            if ok:
-                others = sorted((x for r, x in vals.items() if row_key(r) != row_key(row)),
-                                reverse=not lower)
-                ev += f" (next {_fmt(others[0])})" if others else ""
-            results.append((ok, ev))
+            if v is None:
+                results.append((INCONCLUSIVE, f"{metric}: missing {row}"))
+                continue
+            others = [r for r in pool if row_key(r) != row_key(row)]
+            if not others or absent:
+                why = f"missing {', '.join(absent)}" if absent else "no other row to compare"
+                results.append((INCONCLUSIVE, f"{metric}: {row} {_fmt(v)}; {why}"))
+                continue
+            verdicts = {r: _beats(cells, (row, metric, v), (r, metric, cells.get(r, metric)), lower)
+                        for r in others}
+            if all(x[0] == REPRODUCES for x in verdicts.values()):
+                verdict = REPRODUCES
+            elif any(x[0] == CONTRADICTED for x in verdicts.values()):
+                verdict = CONTRADICTED
+            else:
+                verdict = INCONCLUSIVE
+            closest = min(verdicts, key=lambda r: verdicts[r][1])  # the smallest lower margin bound
+            _, lo, hi, how = verdicts[closest]
+            results.append((verdict, f"{metric}: {row} {_fmt(v)}; {word} of {len(pool)} rows; closest "
+                                     f"{closest} {_fmt(cells.get(closest, metric))} (margin 95 % "
+                                     f"{_ival(lo, hi)}, {how})"))
         elif kind == "close":
             a, b = cells.get(check["a"], metric), cells.get(check["b"], metric)
             if a is None or b is None:
                 missing = [x for x, v in ((check["a"], a), (check["b"], b)) if v is None]
-                results.append((None, f"{metric}: missing {', '.join(missing)}"))
+                results.append((INCONCLUSIVE, f"{metric}: missing {', '.join(missing)}"))
                 continue
             tol = float(check["tol"]) * (abs(b) if check.get("relative") else 1.0)
-            ok = abs(a - b) <= tol + 1e-12
-            results.append((ok, f"{metric}: |{check['a']} {_fmt(a)} − {check['b']} {_fmt(b)}| = "
-                                f"{_fmt(abs(a - b))} {'≤' if ok else '>'} {_fmt(tol)}"))
+            lo, hi, how = noise_lib.difference_interval(a, b, cells.noise_of(check["a"], metric),
+                                                        cells.noise_of(check["b"], metric))
+            if math.isnan(lo):
+                verdict = INCONCLUSIVE
+            elif -tol - 1e-12 <= lo and hi <= tol + 1e-12:
+                verdict = REPRODUCES
+            elif lo > tol or hi < -tol:
+                verdict = CONTRADICTED
+            else:
+                verdict = INCONCLUSIVE
+            results.append((verdict, f"{metric}: {check['a']} {_fmt(a)} − {check['b']} {_fmt(b)} = "
+                                     f"{_fmt(a - b)} (95 % {_ival(lo, hi)}, {how}) vs ±{_fmt(tol)}"))
         elif kind == "range":
             v = cells.get(check["row"], metric)
             if v is None:
-                results.append((None, f"{metric}: missing {check['row']}"))
+                results.append((INCONCLUSIVE, f"{metric}: missing {check['row']}"))
                 continue
-            lo, hi = check.get("min", -math.inf), check.get("max", math.inf)
-            ok = lo <= v <= hi
-            bounds = " and ".join(x for x in [f"≥ {lo}" if "min" in check else "",
-                                               f"≤ {hi}" if "max" in check else ""] if x)
-            results.append((ok, f"{metric}: {check['row']} {_fmt(v)} {'within' if ok else 'not'} {bounds}"))
+            lo_b, hi_b = check.get("min", -math.inf), check.get("max", math.inf)
+            lo, hi = _value_interval(cells, check["row"], metric, v)
+            if lo_b <= lo and hi <= hi_b:
+                verdict = REPRODUCES
+            elif hi < lo_b or lo > hi_b:
+                verdict = CONTRADICTED
+            else:
+                verdict = INCONCLUSIVE
+            bounds = " and ".join(x for x in [f"≥ {lo_b}" if "min" in check else "",
+                                               f"≤ {hi_b}" if "max" in check else ""] if x)
+            results.append((verdict, f"{metric}: {check['row']} {_fmt(v)} (95 % {_ival(lo, hi)}) vs {bounds}"))
     return _combine(results)
 
 
-def _combine(results: list[tuple[bool | None, str]]) -> tuple[bool | None, str]:
-    holds = [h for h, _ in results]
-    if any(h is False for h in holds):
-        verdict = False
-    elif holds and all(h is True for h in holds):
-        verdict = True
+def _combine(results: list[tuple[str, str]]) -> tuple[str, str]:
+    verdicts = [v for v, _ in results]
+    if any(v == NOT_TESTABLE for v in verdicts):
+        verdict = NOT_TESTABLE
+    elif any(v == CONTRADICTED for v in verdicts):
+        verdict = CONTRADICTED
+    elif verdicts and all(v == REPRODUCES for v in verdicts):
+        verdict = REPRODUCES
     else:
-        verdict = None
+        verdict = INCONCLUSIVE
     return verdict, "; ".join(e for _, e in results)
 
 
-def _evaluate(claims, table: pd.DataFrame, directions, headline) -> list[dict]:
-    cells = _Cells(table, directions)
+def _evaluate(claims, table: pd.DataFrame, directions, headline, noise=None, literature=()) -> list[dict]:
+    cells = _Cells(table, directions, noise, literature)
     out = []
     for claim in claims:
-        if "check" not in claim and "holds" in claim:  # pre-evaluated extra claim
-            out.append({"text": claim["text"], "holds": claim["holds"],
-                        "evidence": claim.get("evidence", ""), "note": claim.get("note", "")})
+        base = {"text": claim["text"], "note": claim.get("note", "")}
+        category = claim.get("category")
+        if category is not None and category not in CATEGORIES:
+            raise ValueError(f"claim {claim['text']!r}: unknown category {category!r} (known: {list(CATEGORIES)})")
+        if "verdict" in claim:  # pre-evaluated extra claim
+            if claim["verdict"] not in VERDICTS:
+                raise ValueError(f"claim {claim['text']!r}: unknown verdict {claim['verdict']!r}")
+            out.append({**base, "verdict": claim["verdict"], "evidence": claim.get("evidence", "")})
             continue
         check = claim.get("check")
-        if not check:
-            out.append({"text": claim["text"], "holds": None, "evidence": "not machine-checked",
-                        "note": claim.get("note", "")})
-            continue
-        checks = check if isinstance(check, list) else [check]
-        holds, evidence = _combine([evaluate_check(c, cells, headline) for c in checks])
-        out.append({"text": claim["text"], "holds": holds, "evidence": evidence,
-                    "note": claim.get("note", "")})
+        checks = (check if isinstance(check, list) else [check]) if check else []
+        verdict, evidence = _combine([evaluate_check(c, cells, headline) for c in checks]) if checks else \
+            (INCONCLUSIVE, "not machine-checked")
+        if category:
+            verdict = CATEGORIES[category]
+            evidence = f"{claim.get('reason', '')} (measured: {evidence})".strip()
+        elif claim.get("paper_inconsistent"):
+            verdict = NOT_TESTABLE
+            evidence = f"the thesis' own table disagrees with its text: {claim['paper_inconsistent']} " \
+                       f"(measured: {evidence})"
+        out.append({**base, "verdict": verdict, "evidence": evidence})
     return out
 
 
-def evaluate_claims(table_id: str, ours, extra_claims=None, registry: dict | None = None) -> list[dict]:
-    """The thesis' claims about ``table_id`` (plus ``extra_claims``) checked on our table.
+def _literature_rows(table_id: str) -> list[str]:
+    long = paper_values(table_id)
+    notes = long.groupby("row")["note"].apply(lambda x: " ".join(x))
+    return [r for r, n in notes.items() if "literature" in n or "reference" in n]
 
-    Returns ``[{"text", "holds": True|False|None, "evidence", "note"}]``. ``extra_claims`` entries are
-    either registry-style ``{"text", "check"}`` or already evaluated ``{"text", "holds", "evidence"}``.
+
+def evaluate_claims(table_id: str, ours, extra_claims=None, registry: dict | None = None,
+                    noise: Mapping | None = None) -> list[dict]:
+    """The thesis' claims about ``table_id`` (plus ``extra_claims``) decided on our table.
+
+    Returns ``[{"text", "verdict" (one of VERDICTS), "evidence", "note"}]``. ``noise``: {row: {column:
+    record}} of our cells (redsup.tables.noise). ``extra_claims`` entries are registry-style ``{"text",
+    "check"}`` or already decided ``{"text", "verdict", "evidence"}``.
     """
     info = table_info(table_id, registry or load_registry())
     claims = list(info.get("claims") or []) + list(extra_claims or [])
     paper = paper_table(table_id)
     ours = align(as_frame(ours), paper)
-    return _evaluate(claims, ours, paper_directions(table_id), info.get("headline_metric"))
+    return _evaluate(claims, ours, paper_directions(table_id), info.get("headline_metric"),
+                     align_noise(noise, paper), _literature_rows(table_id))
+
+
+def align_noise(noise: Mapping | None, paper: pd.DataFrame) -> dict:
+    """Noise records keyed by the paper's row / column labels where ours match them (as ``align``)."""
+    rows = {row_key(r): r for r in paper.index}
+    cols = {column_key(c): c for c in paper.columns}
+    return {rows.get(row_key(r), r): {cols.get(column_key(c), c): rec for c, rec in cs.items()}
+            for r, cs in (noise or {}).items()}
 
 
 def evaluate_claims_on_paper(table_id: str, registry: dict | None = None) -> list[dict]:
-    """The same claims checked on the paper's own numbers (a transcription / consistency check)."""
+    """The same claims decided on the paper's own numbers (a transcription / consistency check; no noise,
+    so a tie is inconclusive)."""
     info = table_info(table_id, registry or load_registry())
     paper = paper_table(table_id)
     if paper.empty:
-        return [{"text": c["text"], "holds": None, "evidence": "no paper values", "note": ""}
+        return [{"text": c["text"], "verdict": INCONCLUSIVE, "evidence": "no paper values", "note": ""}
                 for c in info.get("claims") or []]
-    return _evaluate(info.get("claims") or [], paper, paper_directions(table_id), info.get("headline_metric"))
+    claims = [{k: v for k, v in c.items() if k not in ("category", "paper_inconsistent")}
+              for c in info.get("claims") or []]
+    return _evaluate(claims, paper, paper_directions(table_id), info.get("headline_metric"))
+
+
+def count_verdicts(claims: Sequence[Mapping]) -> dict[str, int]:
+    """{verdict key: count} over VERDICTS (keys with underscores: reproduces, not_testable, ...)."""
+    return {v.replace(" ", "_"): sum(c["verdict"] == v for c in claims) for v in VERDICTS}

@@ -10,12 +10,15 @@ from pathlib import Path
 
 import pandas as pd
 
-from redsup.tables.claims import evaluate_claims, evaluate_claims_on_paper, headline_tau
+from redsup.tables import noise as noise_lib
+from redsup.tables.claims import (VERDICTS, align_noise, count_verdicts, evaluate_claims,
+                                  evaluate_claims_on_paper, headline_tau)
 from redsup.tables.registry import (align, as_frame, load_registry, paper_table, paper_values,
                                     table_info)
 
 DASH = "—"
-MARK = {True: "✔", False: "✘", None: "n/a"}
+MARK = {"reproduces": "✔", "contradicted": "✘", "inconclusive": "≈", "not testable": "○",
+        "data description": "▫"}
 
 
 # ------------------------------------------------------------------------------------ formatting
@@ -107,14 +110,22 @@ def _status(row: str, in_ours: bool, in_paper: bool, notes: dict[str, str]) -> s
     return "paper only: not reproduced"
 
 
-def build_table(table_id: str, ours) -> tuple[pd.DataFrame, pd.DataFrame, dict]:
-    """(display table of strings, CSV table with raw numbers, layout info) for ``table_id``."""
+def build_table(table_id: str, ours, noise=None) -> tuple[pd.DataFrame, pd.DataFrame, dict]:
+    """(display table of strings, CSV table with raw numbers, layout info) for ``table_id``.
+
+    ``noise`` ({row: {column: record}}): cells with a spread show ``mean ± std`` (seeds: std over seeds;
+    bootstrap: the standard error), and the CSV gets a ``<column> (ours) std`` column beside each such one.
+    """
     ours = as_frame(ours)
     paper = paper_table(table_id)
     paper_txt = paper_table(table_id, text=True)
     has_paper = not paper.empty
     if has_paper:
         ours = align(ours, paper)
+        noise = align_noise(noise, paper)
+    spreads = {(str(r), str(c)): noise_lib.spread(rec) for r, cs in (noise or {}).items() for c, rec in cs.items()}
+    spreads = {k: v for k, v in spreads.items() if v is not None}
+    spread_cols = {c for _, c in spreads}
     if ours.index.has_duplicates:
         raise ValueError(f"{table_id}: duplicate row labels {sorted(set(ours.index[ours.index.duplicated()]))}")
     rows = list(paper.index) + [r for r in ours.index if r not in paper.index]
@@ -128,10 +139,14 @@ def build_table(table_id: str, ours) -> tuple[pd.DataFrame, pd.DataFrame, dict]:
         if not has_paper:
             header.append(c)
             sources.append(("ours", c))
+            if c in spread_cols:
+                sources.append(("std", c))
             continue
         if c in ours.columns:
             header.append(f"{c} (ours)")
             sources.append(("ours", c))
+        if c in spread_cols:
+            sources.append(("std", c))
         if c in paper.columns:
             header.append(f"{c} (paper)")
             sources.append(("paper", c))
@@ -143,8 +158,14 @@ def build_table(table_id: str, ours) -> tuple[pd.DataFrame, pd.DataFrame, dict]:
         for kind, c in sources:
             if kind == "ours":
                 v = ours.at[r, c] if in_ours else None
-                d_line.append(fmt_value(v, decimals.get(c)))
+                text = fmt_value(v, decimals.get(c))
+                sd = spreads.get((r, c))
+                if sd is not None and text != DASH:
+                    text += f" ± {fmt_value(sd, decimals.get(c))}"
+                d_line.append(text)
                 r_line.append(_plain(v))
+            elif kind == "std":
+                r_line.append(spreads.get((r, c)))
             else:
                 t = paper_txt.at[r, c] if in_paper else ""
                 d_line.append(t if t != "" else DASH)
@@ -157,8 +178,17 @@ def build_table(table_id: str, ours) -> tuple[pd.DataFrame, pd.DataFrame, dict]:
         raw.append(r_line)
     if has_paper:
         header.append("status")
+    raw_header = [header[0]]
+    hi = 1
+    for kind, c in sources:
+        if kind == "std":
+            raw_header.append(f"{c} (ours) std" if has_paper else f"{c} std")
+        else:
+            raw_header.append(header[hi])
+            hi += 1
+    raw_header += header[hi:]
     display_df = pd.DataFrame(display, columns=header)
-    raw_df = pd.DataFrame(raw, columns=header, dtype=object)
+    raw_df = pd.DataFrame(raw, columns=raw_header, dtype=object)
     info = {"rows_paper": len(paper.index), "rows_ours": len(ours.index),
             "rows_both": sum(r in paper.index for r in ours.index), "has_paper": has_paper}
     return display_df, raw_df, info
@@ -216,43 +246,52 @@ def _score_lines(score: dict) -> list[str]:
         else:
             lines.append(f"Scorecard: Kendall τ of our row order vs the paper's on {score['headline_metric']}: "
                          f"{score['kendall_tau']:+.3f} (n = {score['n_rows']} rows).")
+    if score["claims"]:
+        lines.append("Claims: " + _counts_text(score["counts"]) + ".")
     for c in score["claims"]:
-        paper = f" [paper: {MARK[c['holds_on_paper']]}]" if "holds_on_paper" in c else ""
-        lines.append(f"{MARK[c['holds']]} {c['text']} — {c['evidence']}{paper}")
+        paper = f" [on the paper's numbers: {c['verdict_on_paper']}]" if "verdict_on_paper" in c else ""
+        lines.append(f"{MARK[c['verdict']]} {c['verdict']}: {c['text']} — {c['evidence']}{paper}")
     return lines
 
 
+def _counts_text(counts: dict) -> str:
+    return ", ".join(f"{counts[v.replace(' ', '_')]} {v}" for v in VERDICTS)
+
+
 def write_table(table_id: str, ours, out_md, out_csv, out_tex, extra_claims=None, *,
-                note: str | None = None, registry: dict | None = None) -> dict:
+                note: str | None = None, registry: dict | None = None, noise=None) -> dict:
     """Write our table with the paper's value beside each cell as CSV, Markdown and LaTeX, plus
     ``<table_id>.score.json`` beside ``out_md``. Returns the score dict.
 
     ``ours``: DataFrame indexed by row label (or with a ``row`` column), one column per metric, named as
-    in paper_values.csv (matching is lenient, see redsup.tables.registry). ``extra_claims``: claims
-    added by the caller (registry form ``{"text", "check"}`` or evaluated ``{"text", "holds",
+    in paper_values.csv (matching is lenient, see redsup.tables.registry). ``noise``: {row: {column:
+    record}} (redsup.tables.noise): shown as ± std and used to decide the claims. ``extra_claims``: claims
+    added by the caller (registry form ``{"text", "check"}`` or decided ``{"text", "verdict",
     "evidence"}``). ``note``: appended to the caption (e.g. profile and seed).
     """
     registry = registry or load_registry()
     info = table_info(table_id, registry)
-    display, raw, layout = build_table(table_id, ours)
+    display, raw, layout = build_table(table_id, ours, noise)
     paper = paper_table(table_id)
     aligned = align(as_frame(ours), paper) if layout["has_paper"] else as_frame(ours)
     tau = headline_tau(aligned, paper, info.get("headline_metric"))
-    claims = evaluate_claims(table_id, ours, extra_claims=extra_claims, registry=registry)
+    claims = evaluate_claims(table_id, ours, extra_claims=extra_claims, registry=registry, noise=noise)
     on_paper = evaluate_claims_on_paper(table_id, registry) if layout["has_paper"] else []
     for c, p in zip(claims, on_paper):  # extra claims come last and have no paper check
-        c["holds_on_paper"], c["evidence_paper"] = p["holds"], p["evidence"]
-    evaluated = [c for c in claims if c["holds"] is not None]
+        c["verdict_on_paper"], c["evidence_paper"] = p["verdict"], p["evidence"]
+    counts = count_verdicts(claims)
     score = {
         "table_id": table_id, "title": info["title"], "stage": info["stage"], "kind": info.get("kind", "table"),
         "headline_metric": info.get("headline_metric"), "has_paper": layout["has_paper"],
         "kendall_tau": tau["kendall_tau"], "n_rows": tau["n_rows"], "tau_rows": tau["rows"],
         "rows_paper": layout["rows_paper"], "rows_ours": layout["rows_ours"], "rows_both": layout["rows_both"],
-        "claims": claims, "claims_total": len(claims), "claims_evaluated": len(evaluated),
-        "claims_held": sum(c["holds"] is True for c in claims),
+        "claims": claims, "claims_total": len(claims), "counts": counts,
         "outputs": {"md": str(out_md), "csv": str(out_csv), "tex": str(out_tex)},
     }
     caption = _caption(info, registry, note)
+    if noise:
+        caption += (" Ours: mean ± std (over training seeds, or the bootstrap standard error over the test "
+                    "units); claims are decided on 95 % intervals of these (see the README, 'Verdicts').")
     lines = _score_lines(score)
     for path in (out_md, out_csv, out_tex):
         Path(path).parent.mkdir(parents=True, exist_ok=True)
@@ -272,7 +311,9 @@ def write_table(table_id: str, ours, out_md, out_csv, out_tex, extra_claims=None
 
 # ------------------------------------------------------------------------------------ scorecard
 def write_scorecard(score_jsons: Iterable[str | Path], out_md, registry: dict | None = None) -> dict:
-    """Gather ``<id>.score.json`` files into one Markdown scorecard (one line per table, then the claims).
+    """Gather ``<id>.score.json`` files into one Markdown scorecard: per table and in total, how many claims
+    reproduce, are inconclusive, are contradicted, are not testable here, or are data descriptions; then
+    every claim with its evidence.
 
     Returns a summary dict (counts). Registry tables without a score file are listed as not built.
     """
@@ -281,42 +322,53 @@ def write_scorecard(score_jsons: Iterable[str | Path], out_md, registry: dict | 
     scores = [json.loads(Path(p).read_text()) for p in score_jsons]
     scores.sort(key=lambda s: (order.get(s["table_id"], len(order)), s["table_id"]))
     built = {s["table_id"] for s in scores}
-    held = sum(s["claims_held"] for s in scores)
-    evaluated = sum(s["claims_evaluated"] for s in scores)
-    total = sum(s["claims_total"] for s in scores)
+    keys = [v.replace(" ", "_") for v in VERDICTS]
+    total = {k: sum(s["counts"][k] for s in scores) for k in keys}
+    by_stage: dict[str, dict[str, int]] = {}
+    for s in scores:
+        st = by_stage.setdefault(s["stage"], {k: 0 for k in keys})
+        for k in keys:
+            st[k] += s["counts"][k]
     taus = [s["kendall_tau"] for s in scores if s["kendall_tau"] is not None]
-    paper_held = sum(sum(c.get("holds_on_paper") is True for c in s["claims"]) for s in scores)
-    paper_eval = sum(sum(c.get("holds_on_paper") is not None for c in s["claims"]) for s in scores)
-
+    paper_bad = [(s["table_id"], c["text"]) for s in scores for c in s["claims"]
+                 if c["verdict"] in VERDICTS[:3] and c.get("verdict_on_paper") not in (None, "reproduces")]
+    tested = total["reproduces"] + total["inconclusive"] + total["contradicted"]
+    head = " | ".join(VERDICTS)
     md = ["# Scorecard: paper vs ours", "",
-          f"{len(scores)} tables. Kendall τ = tau-b of our row ordering vs the paper's on the headline metric "
-          "(n = rows present in both). Claims: held / evaluated / stated (n/a = a row or metric it needs "
-          "is not reproduced). Paper check = the same claims evaluated on the thesis' own numbers.", "",
-          f"Claims held: **{held} / {evaluated}** evaluated ({total} stated); "
-          f"mean τ {sum(taus) / len(taus):+.3f} over {len(taus)} tables." if taus else
-          f"Claims held: **{held} / {evaluated}** evaluated ({total} stated); no τ available.", "",
-          "| table | stage | headline metric | τ (n) | claims held / evaluated / stated | paper check |",
-          "|:---|:---|:---|---:|---:|---:|"]
+          f"{len(scores)} tables. Each claim of the theses is decided on our numbers with the measured noise "
+          "(95 % intervals over training seeds or a paired bootstrap over the test units): **reproduces** "
+          "(the claimed effect is beyond the noise), **inconclusive** (inside the noise, a tie, or a cell "
+          "missing), **contradicted** (the opposite effect is beyond the noise); **not testable** (about prior "
+          "work, real data, or contradicted by the thesis' own table) and **data description** (true by how "
+          "the data were configured) are listed but not counted as results. Kendall τ = tau-b of our row "
+          "ordering vs the paper's on the headline metric (n = rows in both).", "",
+          f"**Total: {_counts_text(total)}** — {total['reproduces']} of {tested} testable claims reproduce"
+          + (f"; mean τ {sum(taus) / len(taus):+.3f} over {len(taus)} tables." if taus else "."), "",
+          "| stage | " + head + " |", "|:---|" + "---:|" * len(VERDICTS)]
+    for stage, c in by_stage.items():
+        md.append(f"| {stage} | " + " | ".join(str(c[k]) for k in keys) + " |")
+    md += ["", "| table | stage | headline metric | τ (n) | " + head + " |",
+           "|:---|:---|:---|---:|" + "---:|" * len(VERDICTS)]
     for s in scores:
         tau = f"{s['kendall_tau']:+.3f} ({s['n_rows']})" if s["kendall_tau"] is not None else f"n/a ({s['n_rows']})"
-        ph = sum(c.get("holds_on_paper") is True for c in s["claims"])
-        pe = sum(c.get("holds_on_paper") is not None for c in s["claims"])
         md.append(f"| {s['table_id']} | {s['stage']} | {_md_cell(s['headline_metric'] or '—')} | {tau} | "
-                  f"{s['claims_held']} / {s['claims_evaluated']} / {s['claims_total']} | "
-                  f"{f'{ph} / {pe}' if pe else '—'} |")
+                  + " | ".join(str(s["counts"][k]) for k in keys) + " |")
     missing = [t for t in registry["tables"] if t not in built]
     if missing:
         md += ["", f"Not built: {', '.join(missing)}."]
+    if paper_bad:
+        md += ["", "Counted claims that do not reproduce on the paper's own numbers (transcription check): "
+               + "; ".join(f"{t}: {x}" for t, x in paper_bad) + "."]
     md += ["", "## Claims", ""]
     for s in scores:
         if not s["claims"]:
             continue
         md += [f"### {s['table_id']}: {s['title']}", ""]
         for c in s["claims"]:
-            paper = f" *(paper: {MARK[c['holds_on_paper']]})*" if "holds_on_paper" in c else ""
-            md.append(f"- {MARK[c['holds']]} {c['text']} — {c['evidence']}{paper}")
+            paper = f" *(on the paper's numbers: {c['verdict_on_paper']})*" if "verdict_on_paper" in c else ""
+            md.append(f"- {MARK[c['verdict']]} **{c['verdict']}**: {c['text']} — {c['evidence']}{paper}")
         md.append("")
     Path(out_md).parent.mkdir(parents=True, exist_ok=True)
     Path(out_md).write_text("\n".join(md))
-    return {"tables": len(scores), "claims_held": held, "claims_evaluated": evaluated, "claims_total": total,
-            "paper_claims_held": paper_held, "paper_claims_evaluated": paper_eval, "not_built": missing}
+    return {"tables": len(scores), "counts": total, "by_stage": by_stage, "paper_not_reproducing": paper_bad,
+            "not_built": missing}
