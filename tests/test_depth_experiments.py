@@ -8,7 +8,7 @@ import torch
 import yaml
 
 from redsup import config as config_mod
-from redsup.depth import configs, data, experiments, networks, reporting
+from redsup.depth import configs, data, experiments, networks, plan, reporting
 from redsup.depth.configs import EvalSpec, Row
 
 torch.set_num_threads(1)
@@ -24,10 +24,22 @@ def cfg():
     return config_mod.resolve(raw)
 
 
+def _scenes_of(cfg, drop=()):
+    """scenes_of as common.smk counts world scenes; ``drop``: (dataset, split) pairs to leave out."""
+    def scenes_of(dataset):
+        counts = cfg["datasets"][dataset].get("scenes", {})
+        return [f"{s}_{i:03d}" for s in ("train", "test", "long") for i in range(counts.get(s, 0))
+                if (dataset, s) not in drop]
+    return scenes_of
+
+
+DEPTH_TABLES = [f"mccraith_ch4_table{i}" for i in range(1, 8)] + ["mccraith_ch4_fig4", "mccraith_ch4_fig5",
+                                                                   "galteland_table4_4", "galteland_table5_1"]
+
+
 def test_rows_of_every_table_at_default(cfg):
-    available, cameras = configs.availability(cfg)
-    rows = configs.table_rows(cfg["depth"], available, cameras)
-    assert set(rows) == set(configs.TABLES)
+    rows = plan.table_rows(cfg, _scenes_of(cfg))
+    assert set(rows) == set(DEPTH_TABLES)
     t1 = rows["mccraith_ch4_table1"]
     assert len(t1) == 22 and t1[0].label == "baseline [9] (no instance adaptation)" and t1[0].step == 0
     assert t1[1].label == "whole network"
@@ -38,23 +50,33 @@ def test_rows_of_every_table_at_default(cfg):
     assert labels >= {"ours | M", "ours | S", "ours | MS", "Monodepth V2 [9] | S"}
     assert [r.label for r in rows["mccraith_ch4_table7"]] == ["baseline | 0", "Ours | 20", "Ours | 50"]
     assert len(rows["galteland_table5_1"]) == 9 and rows["galteland_table4_4"][1].label == "Front+Back"
+    available, cameras = plan._available(cfg, _scenes_of(cfg))
     models = configs.trained_models(cfg["depth"], {d: a["train"] for d, a in available.items()}, cameras)
     assert set(models) == {"world_kitti/M", "world_kitti/S", "world_kitti/MS", "world_cityscapes/M", "world_lyft/M",
                            "world_lyft/M_frontback", "world_ddad/M", "world_naplab/M"}
 
 
 def test_shared_runs(cfg):
-    rows = configs.table_rows(cfg["depth"], *configs.availability(cfg))
-    runs, row_runs = configs.plan(rows)
-    traj = row_runs["mccraith_ch4_table3"][0]
+    rows = plan.table_rows(cfg, _scenes_of(cfg))
+    runs, row_runs = configs.plan(rows, order=list(rows))
+    traj = row_runs["mccraith_ch4_table3"][1]  # the 5-step row: the one trajectory
     spec, parent = runs[traj]
-    assert parent == "mccraith_ch4_table3" and spec.groups == ("depth_encoder", "pose_encoder")
-    assert set(spec.checkpoints) == {0, 5, 10, 25, 50, 75, 100, 150, 200}
+    assert parent == "mccraith_ch4_table1" and spec.groups == ("depth_encoder", "pose_encoder")
+    # the contract: every table a run serves lists it, and each row names its run and step
+    served = plan.runs(cfg, _scenes_of(cfg))[traj]["tables"]
+    assert set(served) >= {"mccraith_ch4_table1", "mccraith_ch4_table2", "mccraith_ch4_table3",
+                           "mccraith_ch4_table5", "mccraith_ch4_table6"}
+    contract_rows = plan.rows(cfg, _scenes_of(cfg))
+    assert ("10^-1", traj, 10) in contract_rows["mccraith_ch4_table2"]
+    assert set(spec.checkpoints) >= {5, 10, 25, 50, 75, 100, 150, 200}
     t1 = dict(zip([r.label for r in rows["mccraith_ch4_table1"]], row_runs["mccraith_ch4_table1"]))
-    assert t1["Depth Encoder + Pose Encoder"] == traj == t1["baseline [9] (no instance adaptation)"]
+    assert t1["Depth Encoder + Pose Encoder"] == traj
+    # every baseline row reads step 0 of one adaptation run on the same model, data and frames
+    base = t1["baseline [9] (no instance adaptation)"]
+    assert 0 in runs[base][0].checkpoints and runs[base][0].groups
     assert t1["Depth Decoder"] != traj
     t2 = dict(zip([r.label for r in rows["mccraith_ch4_table2"]], row_runs["mccraith_ch4_table2"]))
-    assert t2["10^-1"] == traj and t2["baseline"] == traj
+    assert t2["10^-1"] == traj and t2["baseline"] == base
     t6 = dict(zip([r.label for r in rows["mccraith_ch4_table6"]], row_runs["mccraith_ch4_table6"]))
     assert t6["Eigen [16] | ours (instance-wise)"] == traj
     assert runs[t6["Odometry | ours (sequence-wise)"]][0].kind == "sequential"
@@ -68,12 +90,10 @@ def test_shared_runs(cfg):
 
 
 def test_tables_shrink_with_missing_data(cfg):
-    depth = copy.deepcopy(cfg["depth"])
-    available, cameras = configs.availability(cfg)
-    available["world_ddad"] = {"train": 0, "test": 0, "long": 0}
-    available["world_kitti"]["long"] = 0
-    cameras["world_kitti"] = ["cam_front"]  # no stereo partner: no S / MS models
-    rows = configs.table_rows(depth, available, cameras)
+    cfg = copy.deepcopy(cfg)
+    cfg["prepare"]["cameras"] = ["cam_front", "cam_back"]  # no stereo partner: no S / MS models
+    drop = {("world_ddad", s) for s in ("train", "test", "long")} | {("world_kitti", "long")}
+    rows = plan.table_rows(cfg, _scenes_of(cfg, drop))
     assert not rows["mccraith_ch4_fig4"]
     assert not any(r.label.startswith("Odometry") for r in rows["mccraith_ch4_table6"])
     assert {r.label for r in rows["mccraith_ch4_table5"]} == {"ours | M", "Monodepth V2 [9] | M"}
@@ -173,8 +193,14 @@ def test_table_frame_averages_common_frames():
     res_a = {"records": [rec(1, 0, 0.2), rec(3, 0, 0.4), rec(1, 5, 0.1), rec(3, 5, 0.3)]}
     res_b = {"records": [rec(0, 5, reason="missing neighbour"), rec(1, 5, 0.15), rec(2, 5, 0.9), rec(3, 5, 0.25)]}
     rows = [Row("base", spec_a, 0, "g"), Row("inst", spec_a, 5, "g"), Row("seq", spec_b, 5, "g")]
-    df, info = reporting.table_frame("mccraith_ch4_table6", rows, [res_a, res_a, res_b])
+    df, noise, info = reporting.table_frame(rows, [res_a, res_a, res_b], time_column="time [s]")
     assert df.loc["base", "Abs Rel"] == pytest.approx(0.3) and df.loc["seq", "Abs Rel"] == pytest.approx(0.2)
+    # paired bootstrap over the group's common frames (s/1, s/3): the same units for every row
+    assert len({noise[r]["Abs Rel"]["units"] for r in ("base", "inst", "seq")}) == 1
+    reps = noise["base"]["Abs Rel"]["values"]
+    assert set(np.round(reps, 6)) <= {0.2, 0.3, 0.4}  # means of two draws from {0.2, 0.4}
+    inst = np.array(noise["inst"]["Abs Rel"]["values"])
+    assert np.allclose(np.array(reps) - inst, 0.1)  # inst is 0.1 better on both frames: every replicate
     assert list(df["frames"]) == [2, 2, 2] and list(df["skipped"]) == [0, 0, 1]
     assert df.loc["inst", "time [s]"] == pytest.approx(0.5) and info["groups"] == {"g": 2}
     assert reporting.last_quarter(rows, [res_a, res_a, res_b]) == pytest.approx([0.4, 0.3, 0.25])

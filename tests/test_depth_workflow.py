@@ -6,9 +6,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from redsup.depth import checkpoint, configs
+from redsup.depth import checkpoint
+from redsup.tables import load_registry
 
-TABLES = [t for t in configs.TABLES]
+TABLES = [t for t, e in load_registry()["tables"].items() if e["stage"] in ("depth", "galteland")]
+FIGURES = [t for t in TABLES if load_registry()["tables"][t]["kind"] == "figure"]
 
 
 def test_models_load_with_their_meta(built):
@@ -48,7 +50,7 @@ def test_tables_written_with_paper_values_and_score(built, table):
 
 
 def test_figures_and_eval_records(built):
-    for fig in configs.FIGURES:
+    for fig in FIGURES:
         png = built / f"results/figures/{fig}.png"
         assert png.stat().st_size > 1000 and png.read_bytes()[:4] == b"\x89PNG"
     runs = sorted((built / "results/depth/eval").glob("*.json"))
@@ -60,6 +62,7 @@ def test_figures_and_eval_records(built):
             assert all(math.isfinite(v) for k, v in agg.items() if isinstance(v, float) and k != "seconds")
             reasons += agg["skip_reasons"]
         record = json.loads((built / f"results/runs/depth/eval/{path.stem}.json").read_text())
-        assert record["status"] == "FINISHED" and record["parent"] in configs.TABLES
+        assert record["status"] == "FINISHED" and record["parent"] in TABLES
+        assert json.loads(record["params"]["tables"])[0] == record["parent"]
     # sequential runs cannot adapt the first and last frame of a sequence: reported, not crashed
     assert any("missing neighbour frame" in r for r in reasons)

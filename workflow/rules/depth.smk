@@ -3,30 +3,26 @@
 # train_depth    results/depth/models/{dataset}/{mode}.pt           one model (M, S, MS, M_frontback, ...)
 # predict_depth  results/depth/predictions/{dataset}/{mode}/{scene}.npz   raw network depth of every frame
 # depth_eval     results/depth/eval/{run}.json                      one configuration (a child run)
-# depth_table    results/tables/<id>.{md,csv,tex,score.json}        one table from its runs
-# depth_figure   results/figures/<id>.png (+ the table beside it)   Figs. 4 and 5
-# The configurations are data (config `depth.tables`, `depth.galteland`), expanded by
-# redsup.depth.configs.table_rows; rows that need the same run share one depth_eval job.
+# depth_figure   results/figures/<id>.png                           Figs. 4 and 5 (their tables: rule table)
+# The tables are data (config `depth.tables.<table id>`), expanded by redsup.depth.plan; rows that need the
+# same run share one depth_eval job.
 import re
 
 import redsup.depth.configs as depth_configs
+import redsup.depth.plan as depth_plan
 
-DEPTH = config["depth"]
-DEPTH_TABLE_IDS = [t for t in depth_configs.TABLES if t not in depth_configs.FIGURES]
-
-DEPTH_AVAILABLE, DEPTH_CAMERAS = depth_configs.availability(config)  # as scenes_of / cameras_of count them
-DEPTH_ROWS = depth_configs.table_rows(DEPTH, DEPTH_AVAILABLE, DEPTH_CAMERAS)
-DEPTH_RUNS, DEPTH_ROW_RUNS = depth_configs.plan(DEPTH_ROWS)
+DEPTH_RUNS = depth_plan.runs(config, scenes_of)
+DEPTH_FIGURES = [t for t in FIGURE_IDS if "figure" in config["depth"]["tables"].get(t, {})]
 
 
 rule train_depth:
     input:
-        unpack(lambda wc: depth_configs.train_inputs(config, wc.dataset, wc.mode)),
+        unpack(lambda wc: depth_configs.train_inputs(config, wc.dataset, wc.mode, scenes_of(wc.dataset))),
     output:
         "results/depth/models/{dataset}/{mode}.pt",
     log:
-        "results/logs/depth/train/{dataset}/{mode}.log",
-        run="results/runs/depth/train/{dataset}/{mode}.json",
+        "results/logs/depth/models/{dataset}/{mode}.log",
+        run="results/runs/depth/models/{dataset}/{mode}.json",
     wildcard_constraints:
         mode=r"[A-Za-z0-9_]+",
     threads: 1
@@ -46,8 +42,8 @@ rule predict_depth:
     output:
         "results/depth/predictions/{dataset}/{mode}/{scene}.npz",
     log:
-        "results/logs/depth/predict/{dataset}/{mode}/{scene}.log",
-        run="results/runs/depth/predict/{dataset}/{mode}/{scene}.json",
+        "results/logs/depth/predictions/{dataset}/{mode}/{scene}.log",
+        run="results/runs/depth/predictions/{dataset}/{mode}/{scene}.json",
     wildcard_constraints:
         mode=r"[A-Za-z0-9_]+",
     threads: 1
@@ -62,9 +58,11 @@ rule predict_depth:
 
 rule depth_eval:
     input:
-        unpack(lambda wc: depth_configs.eval_inputs(config, DEPTH_RUNS[wc.run][0])),
+        unpack(lambda wc: depth_plan.eval_files(config, DEPTH_RUNS[wc.run], scenes_of)),
     output:
         "results/depth/eval/{run}.json",
+    params:
+        run=lambda wc: DEPTH_RUNS[wc.run],
     log:
         "results/logs/depth/eval/{run}.log",
         run="results/runs/depth/eval/{run}.json",
@@ -80,43 +78,18 @@ rule depth_eval:
         "../scripts/depth_eval.py"
 
 
-rule depth_table:
-    input:
-        lambda wc: depth_configs.table_inputs(DEPTH_ROW_RUNS, wc.table),
-    output:
-        md="results/tables/{table}.md",
-        csv="results/tables/{table}.csv",
-        tex="results/tables/{table}.tex",
-        score="results/tables/{table}.score.json",
-    log:
-        "results/logs/tables/{table}.log",
-        run="results/runs/tables/{table}.json",
-    wildcard_constraints:
-        table="|".join(DEPTH_TABLE_IDS),
-    threads: 1
-    resources:
-        mem_mb=1000,
-        runtime=10,
-    conda:
-        ENV
-    script:
-        "../scripts/depth_table.py"
-
-
 rule depth_figure:
     input:
-        lambda wc: depth_configs.table_inputs(DEPTH_ROW_RUNS, wc.table),
+        lambda wc: [depth_plan.result_path(run) for run in dict.fromkeys(r[1] for r in TABLE_ROWS.get(wc.figure, []))],
     output:
-        png="results/figures/{table}.png",
-        md="results/tables/{table}.md",
-        csv="results/tables/{table}.csv",
-        tex="results/tables/{table}.tex",
-        score="results/tables/{table}.score.json",
+        "results/figures/{figure}.png",
     log:
-        "results/logs/figures/{table}.log",
-        run="results/runs/figures/{table}.json",
+        "results/logs/figures/{figure}.log",
+        run="results/runs/figures/{figure}.json",
+    params:
+        rows=lambda wc: [list(r) for r in TABLE_ROWS.get(wc.figure, [])],
     wildcard_constraints:
-        table="|".join(depth_configs.FIGURES),
+        figure="|".join(DEPTH_FIGURES) or "(?!)",
     threads: 1
     resources:
         mem_mb=1000,
@@ -124,4 +97,4 @@ rule depth_figure:
     conda:
         ENV
     script:
-        "../scripts/depth_table.py"
+        "../scripts/depth_figure.py"

@@ -49,13 +49,10 @@ rule data_summary:
     input:
         prepared=PREPARED_TARGETS,
     output:
-        md="results/tables/data_summary.md",
-        csv="results/tables/data_summary.csv",
-        tex="results/tables/data_summary.tex",
-        score="results/tables/data_summary.score.json",
+        "results/data/summary.json",
     log:
-        "results/logs/tables/data_summary.log",
-        run="results/runs/tables/data_summary.json",
+        "results/logs/data/summary.log",
+        run="results/runs/data/summary.json",
     threads: 1
     resources:
         mem_mb=2000,

@@ -1,17 +1,17 @@
-"""Snakemake entry point: summary table of the prepared data (no paper values)."""
+"""Snakemake entry point: one line per prepared dataset (scenes, frames, cameras, LiDAR density, detections),
+the result the data_summary table reads."""
 import sys
 
 sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821
 
+import json  # noqa: E402
+
 from redsup.datastats import prepared_summary  # noqa: E402
-from redsup.tables import write_table  # noqa: E402
+from redsup.fileio import write_text_atomic  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
 
 sm = snakemake  # noqa: F821
-with child_run(sm.log.run, "data_summary", "summary", rule=sm.rule, wildcards={},
-               config=sm.config) as run:
+with child_run(sm.log.run, "data_summary", "summary", rule=sm.rule, wildcards={}, config=sm.config) as run:
     table = prepared_summary(sm.input.prepared)
-    write_table("data_summary", table, sm.output.md, sm.output.csv, sm.output.tex)
-    for path in (sm.output.md, sm.output.csv, sm.output.tex):
-        run.log_parent_artifact(path)
+    write_text_atomic(sm.output[0], json.dumps({"rows": table.to_dict(orient="records")}, indent=1, default=str))
     print(table.to_string())

@@ -7,19 +7,18 @@ import json  # noqa: E402
 
 import torch  # noqa: E402
 
-from redsup.depth import checkpoint, configs, data, experiments  # noqa: E402
+from redsup.depth import checkpoint, data, experiments, plan  # noqa: E402
 from redsup.fileio import write_text_atomic  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
 
 sm = snakemake  # noqa: F821
 torch.set_num_threads(sm.threads)
 cfg = sm.config["depth"]
-rows = configs.table_rows(cfg, *configs.availability(sm.config))
-runs, _ = configs.plan(rows)
-spec, parent = runs[sm.wildcards.run]
+spec = plan.spec_of(sm.params.run)
+tables = list(sm.params.run["tables"])
 
-with child_run(sm.log.run, parent, spec.name, rule=sm.rule, wildcards=dict(sm.wildcards), config=sm.config,
-               params=spec.as_dict()) as run:
+with child_run(sm.log.run, tables[0], spec.name, rule=sm.rule, wildcards=dict(sm.wildcards), config=sm.config,
+               params={**spec.as_dict(), "tables": tables}) as run:
     models, meta = checkpoint.load(sm.input.model)
     stereo = sm.input.get("stereo")
     seqs = []

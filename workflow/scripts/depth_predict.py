@@ -8,7 +8,7 @@ import time  # noqa: E402
 import torch  # noqa: E402
 
 from redsup.depth import checkpoint, data  # noqa: E402
-from redsup.depth.configs import model_parent  # noqa: E402
+from redsup.depth.plan import model_parent  # noqa: E402
 from redsup.depth.experiments import predict_sequence  # noqa: E402
 from redsup.fileio import save_npz_atomic  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
@@ -18,7 +18,7 @@ torch.set_num_threads(sm.threads)
 dev = sm.config["depth"]["device"]
 device = dev if dev != "auto" else ("cuda" if torch.cuda.is_available() else "cpu")
 name = f"{sm.wildcards.dataset}/{sm.wildcards.mode}/{sm.wildcards.scene}"
-parent = model_parent(sm.config["depth"], f"{sm.wildcards.dataset}/{sm.wildcards.mode}")
+parent = model_parent(sm.config, f"{sm.wildcards.dataset}/{sm.wildcards.mode}")
 with child_run(sm.log.run, parent, f"predict {name}", rule=sm.rule, wildcards=dict(sm.wildcards),
                config=sm.config) as run:
     models, meta = checkpoint.load(sm.input.model, device)

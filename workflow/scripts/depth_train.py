@@ -8,7 +8,7 @@ import zlib  # noqa: E402
 import torch  # noqa: E402
 
 from redsup.depth import checkpoint, data, networks, training  # noqa: E402
-from redsup.depth.configs import model_parent  # noqa: E402
+from redsup.depth.plan import model_parent  # noqa: E402
 from redsup.depth.experiments import loss_settings  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
 
@@ -26,7 +26,7 @@ params = {"dataset": dataset, "mode": mode, "sources": sources, "cameras": mode_
           "device": device, "model": {**cfg["model"], "init_disparity": init_disparity}, "loss": cfg["loss"],
           "train": {**cfg["train"], **({"steps": steps} if steps else {})}}
 
-parent = model_parent(cfg, f"{dataset}/{mode}")
+parent = model_parent(sm.config, f"{dataset}/{mode}")
 with child_run(sm.log.run, parent, f"train {dataset} {mode}", rule=sm.rule, wildcards=dict(sm.wildcards),
                config=sm.config, params=params) as run:
     seqs = []
@@ -61,6 +61,6 @@ with child_run(sm.log.run, parent, f"train {dataset} {mode}", rule=sm.rule, wild
         metric = seqs[0].extra["stereo_baseline_m"]
         meta.update(stereo_baseline=cfg["train"]["stereo_baseline"],
                     stereo_scale_factor=metric / cfg["train"]["stereo_baseline"])
-    checkpoint.save(sm.output[0], models, meta)
+    checkpoint.save(sm.output[0], models, meta, sm.config)
     run.log_metrics({k: float(v) for k, v in summary.items()})
     print(summary)

@@ -15,8 +15,6 @@ import pandas as pd
 from redsup.depth.configs import METRIC_COLUMNS, Row
 from redsup.depth import evaluation
 
-TIME_COLUMN = {"mccraith_ch4_table3": "Seconds per Image", "mccraith_ch4_table6": "time [s]"}
-
 
 def row_records(row: Row, result: Mapping) -> list[dict]:
     """The records of ``result`` that ``row`` reads (its checkpoint)."""
@@ -30,11 +28,16 @@ def common_frames(rows: Seq[Row], results: Seq[Mapping]) -> set[tuple[str, int]]
     return set.intersection(*sets) if sets else set()
 
 
-def table_frame(table_id: str, rows: Seq[Row], results: Seq[Mapping]) -> tuple[pd.DataFrame, dict]:
-    """(ours, info) for ``write_table``: one line per row with the seven metrics, the time column where the
-    thesis has one, ``frames`` (averaged: the group's common frames) and ``skipped`` (frames this row could not
-    evaluate: missing neighbour, no valid ground truth, ...); info holds the skip reasons and the frame counts
-    per group."""
+def table_frame(rows: Seq[Row], results: Seq[Mapping], time_column: str | None = None,
+                with_last_quarter: bool = False) -> tuple[pd.DataFrame, dict, dict]:
+    """(ours, noise, info) for ``write_table``: one line per row with the seven metrics, ``time_column`` (mean
+    seconds per frame) when given, ``Abs Rel (last quarter)`` when ``with_last_quarter``, ``frames`` (averaged: the
+    group's common frames) and ``skipped`` (frames this row could not evaluate: missing neighbour, no valid
+    ground truth, ...). ``noise``: a bootstrap record per metric cell over the group's common frames (the
+    same units for every row of a group: a paired bootstrap). info holds the skip reasons and the frame
+    counts per group."""
+    from redsup.tables import noise as noise_lib
+
     groups: dict[str, list[int]] = {}
     for i, row in enumerate(rows):
         groups.setdefault(row.group, []).append(i)
@@ -45,7 +48,7 @@ def table_frame(table_id: str, rows: Seq[Row], results: Seq[Mapping]) -> tuple[p
         for i in idx:
             keep[i] = frames
         info["groups"][g or "all"] = len(frames)
-    lines = []
+    lines, noise = [], {}
     for i, (row, res) in enumerate(zip(rows, results)):
         recs = row_records(row, res)
         kept = [r for r in recs if (r["sequence"], r["frame"]) in keep[i]]
@@ -53,16 +56,22 @@ def table_frame(table_id: str, rows: Seq[Row], results: Seq[Mapping]) -> tuple[p
         line = {"row": row.label}
         for key, col in METRIC_COLUMNS.items():
             line[col] = agg.get(key, np.nan)
+        if kept:
+            noise[row.label] = {col: noise_lib.bootstrap({f"{r['sequence']}/{r['frame']}": r["metrics"][key]
+                                                          for r in kept})
+                                for key, col in METRIC_COLUMNS.items()}
         secs = [r["seconds"] for r in kept if r.get("seconds") is not None]
-        if table_id in TIME_COLUMN:
-            line[TIME_COLUMN[table_id]] = float(np.mean(secs)) if secs else np.nan
+        if time_column:
+            line[time_column] = float(np.mean(secs)) if secs else np.nan
         line["frames"] = len(kept)
         line["skipped"] = sum("reason" in r for r in recs)
         reasons = sorted({r["reason"] for r in recs if "reason" in r})
         info["reasons"] += [f"{row.label}: {x}" for x in reasons]
         lines.append(line)
-    df = pd.DataFrame(lines).set_index("row")
-    return df, info
+    df = pd.DataFrame(lines).set_index("row") if lines else pd.DataFrame(columns=["row"]).set_index("row")
+    if with_last_quarter and lines:
+        df["Abs Rel (last quarter)"] = last_quarter(rows, results)
+    return df, noise, info
 
 
 def last_quarter(rows: Seq[Row], results: Seq[Mapping]) -> list[float]:

@@ -1,0 +1,228 @@
+"""The depth stage's tables as data (the table contract, redsup.tables.contract; torch-free).
+
+Every table of McCraith ch. 4 and Galteland (Tables 4.4, 5.1) is a section ``depth.tables.<table id>`` of
+config.yaml: table-level values (steps, learning rates, lists to sweep) and ``rows:``, a list of row
+templates. A template's fields (all optional, defaults from ``depth.adaptation``):
+
+    kind     instance | sequential | direct           (instance: adaptation evaluated at checkpoints)
+    dataset, mode                                      the model ``results/depth/models/<dataset>/<mode>.pt``
+    test, split                                        the test data ``<test>/<split>`` (default: dataset / test)
+    frames   key of depth.eval.frames                  (default: short)
+    sources  the test sample (default: the mode's)     ``[]``: prediction only
+    groups   adapted modules (default: adaptation.groups; ``[]``: no adaptation, the baseline)
+    lr, steps, step                                    step = the checkpoint the row reads (instance)
+    group    comparison group: rows of a group are averaged over the same frames
+    label    row label, a format string: ``{field}`` or ``{field|formatter}`` with the formatters
+             modules (ch. 4 Table 1 names), power (10^-k), initial (0 -> "Initial"), name (depth.names)
+    each     {field: list}: one row per combination (in order)
+
+A string value ``$key`` stands for the table-level value ``key`` (so a profile overrides one list, not the
+rows). Rows whose model is not trained or whose test data does not exist are left out.
+"""
+from __future__ import annotations
+
+import itertools
+import re
+from collections.abc import Callable, Mapping, Sequence
+
+from redsup.depth.configs import (METRIC_COLUMNS, EvalSpec, Row, eval_inputs, groups_label, lr_label,
+                                  mode_sources, plan as plan_runs, trained_models)
+
+STAGES = ("depth", "galteland")
+ROW_FIELDS = ("kind", "dataset", "mode", "test", "split", "frames", "sources", "groups", "lr", "steps", "step",
+              "group", "label", "each")
+
+
+def _tables_of_stage(registry=None) -> list[str]:
+    from redsup.tables.registry import load_registry
+
+    reg = registry or load_registry()
+    return [t for t, e in reg["tables"].items() if e["stage"] in STAGES]
+
+
+# ------------------------------------------------------------------------------------------ rows
+_FIELD = re.compile(r"\{(\w+)(?:\|(\w+))?\}")
+
+
+def _formatters(depth_cfg: Mapping) -> dict[str, Callable]:
+    names = depth_cfg["names"]
+    return {
+        "modules": lambda v: groups_label(tuple(v)),
+        "power": lambda v: lr_label(float(v)),
+        "initial": lambda v: "Initial" if int(v) == 0 else str(v),
+        "name": lambda v: names.get(v, v),
+        None: lambda v: f"{v:g}" if isinstance(v, float) else str(v),
+    }
+
+
+def _fill(text: str, values: Mapping, fmt: Mapping[str, Callable]) -> str:
+    def one(m):
+        field, how = m.group(1), m.group(2)
+        if field not in values:
+            raise KeyError(f"row label {text!r}: unknown field {field!r}")
+        if how not in fmt:
+            raise KeyError(f"row label {text!r}: unknown formatter {how!r} (known: {sorted(k for k in fmt if k)})")
+        return fmt[how](values[field])
+    return _FIELD.sub(one, text)
+
+
+def _ref(value, table_cfg: Mapping, where: str):
+    if isinstance(value, str) and value.startswith("$"):
+        key = value[1:]
+        if key not in table_cfg:
+            raise KeyError(f"{where}: {value} names no value of the table section")
+        return table_cfg[key]
+    return value
+
+
+def expand_rows(table_id: str, depth_cfg: Mapping) -> list[Row]:
+    """Every row of one table from its config section (no availability filter)."""
+    table_cfg = depth_cfg["tables"][table_id]
+    a = depth_cfg["adaptation"]
+    fmt = _formatters(depth_cfg)
+    out = []
+    for i, template in enumerate(table_cfg["rows"]):
+        where = f"depth.tables.{table_id}.rows[{i}]"
+        unknown = sorted(set(template) - set(ROW_FIELDS))
+        if unknown:
+            raise KeyError(f"{where}: unknown field(s) {unknown} (known: {list(ROW_FIELDS)})")
+        fixed = {k: _ref(v, table_cfg, where) for k, v in template.items() if k != "each"}
+        each = {k: list(_ref(v, table_cfg, where)) for k, v in (template.get("each") or {}).items()}
+        for combo in itertools.product(*each.values()) if each else [()]:
+            v = {**fixed, **dict(zip(each, combo))}
+            kind = v.get("kind", "instance")
+            dataset, mode = v.get("dataset", a["dataset"]), v.get("mode", a["mode"])
+            test = v.get("test", dataset)
+            groups = tuple(v.get("groups", a["groups"]))
+            sources = tuple(v.get("sources", mode_sources(depth_cfg, mode)))
+            lr = float(v.get("lr", a["lr"])) if groups else 0.0
+            steps = int(v.get("steps", 0)) if kind != "instance" else 0
+            step = int(v.get("step", steps))
+            spec = EvalSpec(kind, f"{dataset}/{mode}", f"{test}/{v.get('split', 'test')}", v.get("frames", "short"),
+                            sources, groups, lr, steps)
+            values = {**v, "kind": kind, "dataset": dataset, "mode": mode, "test": test, "groups": groups,
+                      "lr": lr, "steps": steps, "step": step}
+            label = _fill(v["label"], values, fmt) if "label" in v else groups_label(groups)
+            out.append(Row(label, spec, step, _fill(str(v.get("group", "")), values, fmt)))
+    return out
+
+
+def _available(config: Mapping, scenes_of: Callable[[str], list[str]]) -> tuple[dict, dict]:
+    """(scenes per dataset and split, prepared cameras per dataset), counted with ``scenes_of``."""
+    available, cameras = {}, {}
+    for name, spec in config["datasets"].items():
+        scenes = scenes_of(name)
+        available[name] = {s: sum(x.startswith(f"{s}_") for x in scenes) for s in ("train", "test", "long")}
+        if spec["kind"] == "world":
+            rendered = config["world"]["domains"][spec["domain"]]["cameras"]
+        else:
+            from redsup import adapters
+
+            rendered = adapters.cameras(spec)
+        cameras[name] = [c for c in config["prepare"]["cameras"] if c in rendered]
+    return available, cameras
+
+
+def table_rows(config: Mapping, scenes_of: Callable[[str], list[str]]) -> dict[str, list[Row]]:
+    """Rows of every depth table that can be built with the data and models at hand."""
+    depth_cfg = config["depth"]
+    available, cameras = _available(config, scenes_of)
+    models = set(trained_models(depth_cfg, {d: s["train"] for d, s in available.items()}, cameras))
+
+    def ok(row: Row) -> bool:
+        ds, split = row.spec.data.split("/")
+        return row.spec.model in models and available.get(ds, {}).get(split, 0) > 0
+
+    return {t: [r for r in expand_rows(t, depth_cfg) if ok(r)]
+            for t in _tables_of_stage() if t in depth_cfg["tables"]}
+
+
+def _planned(config, scenes_of):
+    rows = table_rows(config, scenes_of)
+    specs, row_runs = plan_runs(rows, order=list(rows))
+    return rows, specs, row_runs
+
+
+# ------------------------------------------------------------------------------------ the contract
+def runs(config: Mapping, scenes_of) -> dict[str, dict]:
+    """run name -> {"spec": EvalSpec as dict, "tables": every table id a row of which reads it}."""
+    _, specs, row_runs = _planned(config, scenes_of)
+    out = {}
+    for name, (spec, _) in specs.items():
+        tables = [t for t, names in row_runs.items() if name in names]
+        out[name] = {"spec": spec.as_dict(), "tables": tables}
+    return out
+
+
+def spec_of(run: Mapping) -> EvalSpec:
+    d = {k: v for k, v in run["spec"].items() if k != "name"}
+    return EvalSpec(**{k: tuple(v) if isinstance(v, list) else v for k, v in d.items()})
+
+
+def rows(config: Mapping, scenes_of) -> dict[str, list[tuple[str, str, int]]]:
+    rows_, _, row_runs = _planned(config, scenes_of)
+    return {t: [(r.label, run, int(r.step)) for r, run in zip(rs, row_runs[t])] for t, rs in rows_.items()}
+
+
+def result_path(run: str) -> str:
+    return f"results/depth/eval/{run}.json"
+
+
+def model_tables(config: Mapping, model: str) -> list[str]:
+    """The tables (registry order) whose rows use ``model`` (``<dataset>/<mode>``): its runs' parents."""
+    d = config["depth"]
+    return [t for t in _tables_of_stage() if t in d["tables"] and any(r.spec.model == model
+                                                                      for r in expand_rows(t, d))]
+
+
+def model_parent(config: Mapping, model: str) -> str:
+    """The MLflow parent of a model's training and prediction runs: the first table that uses it."""
+    used = model_tables(config, model)
+    return used[0] if used else "data_preparation"
+
+
+def eval_files(config: Mapping, run: Mapping, scenes_of) -> dict:
+    """Inputs of ``depth_eval`` for one run of ``runs``."""
+    spec = spec_of(run)
+    return eval_inputs(config, spec, scenes_of(spec.data_dataset))
+
+
+def table_frame(table_id: str, config: Mapping, rows: Sequence[tuple], results: Mapping[str, Mapping]):
+    """Our table with a paired bootstrap over the common frames of each comparison group."""
+    from redsup.depth import reporting
+    from redsup.tables.contract import TableFrame
+
+    tcfg = config["depth"]["tables"][table_id]
+    by_label = {r.label: r for r in expand_rows(table_id, config["depth"])}
+    row_objs = [by_label[label] for label, _, _ in rows]
+    row_results = [results[run] for _, run, _ in rows]
+    ours, noise, info = reporting.table_frame(row_objs, row_results, time_column=tcfg.get("time_column"),
+                                              with_last_quarter=bool(tcfg.get("last_quarter", False)))
+    return TableFrame(ours, noise, table_note(config, tcfg, info))
+
+
+def table_note(config: Mapping, table_cfg: Mapping, info: Mapping) -> str:
+    """Caption note: the training recipe, the table's own note, the frames per comparison group, skips."""
+    d = config["depth"]
+    overrides = sorted({int(m["steps"]) for m in d["models"] if "steps" in m})
+    steps = f"{d['train']['steps']} steps"
+    if overrides:
+        steps += f" ({'/'.join(map(str, overrides))} for some models)"
+    parts = [f"Profile {config.get('profile')}: embedded world, networks trained from scratch "
+             f"(ResNet-18 width {d['model']['base_channels']}, {steps} of batch {d['train']['batch_size']}, "
+             f"flips {'on' if d['train']['flip'] else 'off'}), no ImageNet weights"]
+    if table_cfg.get("note"):
+        parts.append(str(table_cfg["note"]).rstrip("."))
+    groups = info.get("groups", {})
+    if groups:
+        parts.append("frames averaged per comparison group (the same frames for every row of a group): "
+                     + ", ".join(f"{g or 'all'} {n}" for g, n in groups.items()))
+    parts.append("± = bootstrap standard error over those frames (one trained model per row: no seed spread)")
+    reasons = info.get("reasons", [])
+    if reasons:
+        parts.append(f"{len(reasons)} skip reason(s), e.g. '{reasons[0]}' (all in the log)")
+    return "; ".join(parts)
+
+
+__all__ = ["METRIC_COLUMNS", "expand_rows", "table_rows", "runs", "rows", "result_path", "table_frame",
+           "model_parent", "model_tables", "eval_files", "spec_of"]
