@@ -1,4 +1,5 @@
-"""McCraith ch. 5 scaling methods on synthetic scenes: known per-frame scales, skipped frames, tables."""
+"""McCraith ch. 5 scaling methods on synthetic scenes: known per-frame scales, failed fits and their fallback,
+the same frames for every method, tables with paired bootstrap records."""
 import numpy as np
 import pytest
 
@@ -95,28 +96,72 @@ def test_evaluation_of_the_methods():
     # a fixed horizontal plane misreads the pitched road
     assert summary["fixed_plane"]["scale_rel_err"] > 0.05 > summary["road_L30_W3"]["scale_rel_err"]
     for s in summary.values():
-        assert s["n_frames"] == 3 and s["n_skipped"] == 0
+        assert s["n_frames"] == 3 and s["n_not_evaluable"] == 0
+        assert s["coverage"] == 1.0 and s["n_fallback"] == 0
 
 
-def test_frame_without_road_is_skipped_with_a_reason():
+def test_fill_failed_by_hand():
+    ok = [(None, "a"), (2.0, None), (None, "b"), (None, "c"), (5.0, None), (None, "d")]
+    assert methods.fill_failed(ok) == [(2.0, "next"), (2.0, "fit"), (2.0, "previous"), (2.0, "previous"),
+                                       (5.0, "fit"), (5.0, "previous")]
+    assert methods.fill_failed(ok, "raw") == [(1.0, "raw"), (2.0, "fit"), (1.0, "raw"), (1.0, "raw"),
+                                              (5.0, "fit"), (1.0, "raw")]
+    assert methods.fill_failed([(None, "x")] * 2) == [(1.0, "raw")] * 2  # no frame of the scene succeeded
+    with pytest.raises(ValueError, match="unknown fallback"):
+        methods.fill_failed(ok, "median")
+
+
+def test_failed_fit_gets_the_fallback_and_every_method_keeps_the_same_frames():
     scene = _scene(empty_road_frame=1)
+    good = methods.evaluate_scenes([_scene()], "road_L30_W3",
+                                   {"test_000": methods.method_scales(_scene(), "road_L30_W3", camera_height=H_CAM)})
     for name in ("road_L30_W3", "fixed_plane"):
         scales = {scene.name: methods.method_scales(scene, name, camera_height=H_CAM)}
         assert scales[scene.name][1][0] is None
         result = methods.evaluate_scenes([scene], name, scales)
         s = result["summary"]
-        assert (s["n_frames"], s["n_skipped"]) == (2, 1)
-        assert all(np.isfinite(s[k]) for k in ("abs_rel", "rmse", "a1", "scale_rel_err"))
-        assert len(result["skipped"]) == 1 and result["skipped"][0].startswith("test_000 frame 1: ")
-        assert result["frames"][1]["scale"] is None and result["frames"][1]["reason"]
-    # a scene where every frame fails still gives counts, not NaN metrics
+        assert (s["n_frames"], s["n_fit"], s["n_fallback"], s["n_not_evaluable"]) == (3, 2, 1, 0)
+        assert s["coverage"] == pytest.approx(2 / 3)
+        f0, f1 = result["frames"][:2]
+        assert (f1["fit"], f1["source"], f1["evaluated"]) == (False, "previous", True) and f1["reason"]
+        assert f1["scale"] == pytest.approx(f0["scale"])  # frame 0's scale held
+        assert len(result["failed"]) == 1 and result["failed"][0].startswith("test_000 frame 1: ")
+        assert "previous scale" in result["failed"][0]
+        assert sorted(methods.per_frame(result, "abs_rel")) == ["test_000/000000", "test_000/000001",
+                                                                "test_000/000002"]
+    # frame 1's true scale is 35, frame 0's 20: the held scale costs |20/35 - 1| = 0.43 on that frame
+    held = methods.evaluate_scenes([scene], "road_L30_W3",
+                                   {scene.name: methods.method_scales(scene, "road_L30_W3", camera_height=H_CAM)})
+    assert held["frames"][1]["abs_rel"] == pytest.approx(1 - 20 / 35, abs=0.02)
+    assert held["summary"]["abs_rel"] > good["summary"]["abs_rel"] + 0.1
+    # a failure on the first frame takes the next successful frame's scale
+    first = _scene(empty_road_frame=0)
+    r = methods.evaluate_scenes([first], "road_L30_W3",
+                                {first.name: methods.method_scales(first, "road_L30_W3", camera_height=H_CAM)})
+    assert r["frames"][0]["source"] == "next" and r["frames"][0]["scale"] == pytest.approx(r["frames"][1]["scale"])
+    # a scene where every frame fails: the raw output (scale 1) on every frame, counted, coverage 0
     empty = _scene()
     empty.road[:] = False
     result = methods.evaluate_scenes([empty], "road_L30_W3",
                                      {empty.name: methods.method_scales(empty, "road_L30_W3", camera_height=H_CAM)})
-    assert result["summary"] == {"n_frames": 0, "n_skipped": 3, "scale_rel_err": None}
+    s = result["summary"]
+    assert (s["n_frames"], s["n_fit"], s["coverage"]) == (3, 0, 0.0)
+    assert [f["scale"] for f in result["frames"]] == [1.0] * 3 and s["abs_rel"] > 0.9
     row = report.metrics_row(result)
-    assert row["frames"] == 0 and row["skipped"] == 3
+    assert row["frames"] == 3 and row["coverage"] == 0.0
+
+
+def test_frame_without_ground_truth_is_left_out_for_every_method():
+    scene = _scene()
+    scene.gt[2] = 0.0  # no LiDAR return in frame 2
+    units = set()
+    for name in ("gt_median", "single_test", "road_L30_W3"):
+        scales = methods.method_scales(scene, name, camera_height=H_CAM, single=27.0)
+        r = methods.evaluate_scenes([scene], name, None if scales is None else {scene.name: scales})
+        assert (r["summary"]["n_frames"], r["summary"]["n_not_evaluable"]) == (2, 1)
+        assert r["not_evaluable"][0].startswith("test_000 frame 2: no valid ground-truth pixel")
+        units.add(tuple(sorted(methods.per_frame(r, "abs_rel"))))
+    assert units == {("test_000/000000", "test_000/000001")}
 
 
 def test_method_names():
@@ -173,29 +218,73 @@ def test_load_scene_brings_road_masks_to_the_prediction(tmp_path):
         inputs.load_scene(tmp_path / "pred.npz", tmp_path / "gt_big.npz", tmp_path / "road.npz", crop=crop)
 
 
-def _fake_result(abs_rel, skipped=0):
-    summary = {k: abs_rel for k in ("abs_rel", "sq_rel", "rmse", "rmse_log")}
-    summary.update(a1=0.9, a2=0.95, a3=0.99, n_frames=10 - skipped, n_skipped=skipped, scale_rel_err=0.05)
-    return {"summary": summary, "skipped": [f"test_000 frame {i}: why" for i in range(skipped)]}
+def _fake_result(method, abs_rel, units=("test_000/000000", "test_000/000001", "test_000/000002"), failed=0):
+    """A method result on ``units`` with per-frame Abs Rel ``abs_rel`` (a list, one per unit)."""
+    frames = []
+    for i, (u, v) in enumerate(zip(units, abs_rel)):
+        f = {"unit": u, "evaluated": True, "fit": i >= failed, "abs_rel": v, "sq_rel": v, "rmse": v,
+             "rmse_log": v, "a1": 0.9, "a2": 0.95, "a3": 0.99}
+        frames.append(f)
+    summary = {k: float(np.mean([f[k] for f in frames])) for k in ("abs_rel", "sq_rel", "rmse", "rmse_log", "a1",
+                                                                  "a2", "a3")}
+    summary.update(n_frames=len(frames), n_fit=len(frames) - failed, coverage=1 - failed / len(frames),
+                   n_not_evaluable=0, scale_rel_err=0.05)
+    return {"method": method, "summary": summary, "frames": frames,
+            "failed": [f"test_000 frame {i}: why -> previous scale 20" for i in range(failed)], "not_evaluable": []}
 
 
-def test_tables_use_the_paper_row_and_column_names():
-    results = {m: _fake_result(0.1 + 0.01 * i) for i, m in enumerate(
-        ["single_train", "single_test", "fixed_plane", "road_L30_W3", "gt_median"])}
-    t1 = report.table1(results, 30.0, 3.0)
+CAL = {"dataset": "world_x", "mode": "M", "length": 30.0, "width": 3.0, "fallback": "hold",
+       "tables": {"mccraith_ch5_table1": {"rows": [
+                      {"label": "(a) GT Single Scaling (training set)", "method": "single_train"},
+                      {"label": "(b) GT Single Scaling (testing set)", "method": "single_test"},
+                      {"label": "(c) Fixed road plane", "method": "fixed_plane"},
+                      {"label": "(d) Ours", "method": "ours"},
+                      {"label": "GT Scaling (per-frame median, reference)", "method": "gt_median"}],
+                      "note": "box {width:g} x {length:g}"},
+                  "mccraith_ch5_table2": {"rows": [{"label": "Godard et al. [2019]", "method": "gt_median"},
+                                                   {"label": "Ours", "method": "ours"}]},
+                  "mccraith_ch5_table3": {"vary": "length", "values": [6, 10, 30]},
+                  "mccraith_ch5_table4": {"vary": "width", "values": [0.5, 3]},
+                  "mccraith_ch5_fig1": {"series": "long"}}}
+
+
+def _scenes_of(dataset):
+    return ["train_000", "train_001", "test_000", "long_000"]
+
+
+def test_tables_use_the_paper_row_and_column_names_and_carry_paired_bootstrap_records():
+    from redsup.calib import plan
+    from redsup.tables.noise import difference_interval
+
+    config = {"calibration": CAL, "profile": "tiny"}
+    rows = plan.rows(config, _scenes_of)
+    results = {run: _fake_result(run, [0.1 + 0.01 * i, 0.12 + 0.01 * i, 0.11 + 0.01 * i], failed=int(i == 2))
+               for i, (_, run, _) in enumerate(rows["mccraith_ch5_table1"])}
+    frame = plan.table_frame("mccraith_ch5_table1", config, rows["mccraith_ch5_table1"], results)
+    t1 = frame.ours
     aligned = align(t1, paper_table("mccraith_ch5_table1"))
     assert set(paper_table("mccraith_ch5_table1").index) <= set(aligned.index)
     assert set(paper_table("mccraith_ch5_table1").columns) <= set(aligned.columns)
-    assert t1.loc["(d) Ours", "Abs Rel"] == pytest.approx(0.13)
-    t2 = align(report.table2(results, 30.0, 3.0), paper_table("mccraith_ch5_table2"))
-    assert {"Ours", "Godard et al. [2019]"} <= set(t2.index)
-    sweep = {methods.road_method(v, 3.0): _fake_result(0.2) for v in (6, 10, 30)}
-    t3 = report.sweep_table(sweep, [6, 10, 30], vary="length", length=30.0, width=3.0)
-    assert list(t3.index) == ["6", "10", "30"]
+    assert t1.loc["(d) Ours", "Abs Rel"] == pytest.approx(0.14)  # mean of 0.13, 0.15, 0.14
+    assert t1.loc["(c) Fixed road plane", "coverage"] == pytest.approx(2 / 3)
+    assert list(t1["frames"]) == [3] * 5
+    # every metric cell has a bootstrap record over the same 3 frames: the rows are paired
+    a, b = frame.noise["(d) Ours"]["Abs Rel"], frame.noise["(a) GT Single Scaling (training set)"]["Abs Rel"]
+    assert a["kind"] == b["kind"] == "bootstrap" and a["units"] == b["units"] and len(a["values"]) == 200
+    lo, hi, how = difference_interval(0.14, 0.11, a, b)
+    # per frame the difference is exactly 0.03: the paired interval has no width
+    assert how == "paired bootstrap" and lo == pytest.approx(0.03) and hi == pytest.approx(0.03)
+    assert "box 3 x 30" in frame.note and "same 3 test frames" in frame.note
+    assert "(c) Fixed road plane: 1 failed fit(s)" in frame.note
+    # rows over different frames are refused
+    results[rows["mccraith_ch5_table1"][0][1]] = _fake_result("x", [0.1, 0.1], units=("a/000000", "a/000001"))
+    with pytest.raises(ValueError, match="same frames"):
+        plan.table_frame("mccraith_ch5_table1", config, rows["mccraith_ch5_table1"], results)
+    # a sweep: row labels are the values, the index says which side varies
+    sweep = {run: _fake_result(run, [0.2, 0.2, 0.2]) for _, run, _ in rows["mccraith_ch5_table3"]}
+    t3 = plan.table_frame("mccraith_ch5_table3", config, rows["mccraith_ch5_table3"], sweep).ours
+    assert list(t3.index) == ["6", "10", "30"] and t3.index.name == "Length (m)"
     assert set(align(t3, paper_table("mccraith_ch5_table3")).index) >= {"6", "10", "30"}
-    results["fixed_plane"] = _fake_result(0.2, skipped=4)
-    note = report.skipped_note(results, {"fixed_plane": "(c)", "gt_median": "GT"}, limit=2)
-    assert note.startswith("Skipped frames: (c): 4 frame(s) skipped") and "+2 more" in note
     fig = report.fig1_table([20.0, 40.0, None], [21.0, 38.0, 30.0], 30.0, road_gt=[20.0, 38.0, 33.0])
     assert fig.loc[report.FIG1_GT_ROW, "max/min"] == pytest.approx(2.0)
     assert fig.loc[report.FIG1_OURS_ROW, "median |x / GT - 1|"] == pytest.approx(0.05)
@@ -206,15 +295,25 @@ def test_tables_use_the_paper_row_and_column_names():
 def test_plan_lists_the_jobs_as_data():
     from redsup.calib import plan
 
-    cal = {"dataset": "world_x", "mode": "M", "length": 30.0, "width": 3.0, "lengths": [6, 30], "widths": [0.5, 3]}
-    jobs = plan.table_methods(cal)
-    assert jobs["mccraith_ch5_table1"] == ["single_train", "single_test", "fixed_plane", "road_L30_W3", "gt_median"]
-    assert jobs["mccraith_ch5_table3"] == ["road_L6_W3", "road_L30_W3"]
-    assert jobs["mccraith_ch5_table4"] == ["road_L30_W0.5", "road_L30_W3"]
-    assert plan.result_files(cal, "mccraith_ch5_table2") == [
-        "results/calibration/world_x/M/gt_median.json", "results/calibration/world_x/M/road_L30_W3.json"]
-    config = {"calibration": cal, "detection": {"camera": "cam_front"}}
-    scenes = ["train_000", "train_001", "test_000", "long_000"]
+    config = {"calibration": CAL, "detection": {"camera": "cam_front"}}
+    rows = plan.rows(config, _scenes_of)
+    assert [r[1] for r in rows["mccraith_ch5_table1"]] == [
+        "world_x/M/single_train", "world_x/M/single_test", "world_x/M/fixed_plane", "world_x/M/road_L30_W3",
+        "world_x/M/gt_median"]
+    assert rows["mccraith_ch5_table3"] == [("6", "world_x/M/road_L6_W3", None), ("10", "world_x/M/road_L10_W3", None),
+                                           ("30", "world_x/M/road_L30_W3", None)]
+    assert [r[:2] for r in rows["mccraith_ch5_table4"]] == [("0.5", "world_x/M/road_L30_W0.5"),
+                                                            ("3", "world_x/M/road_L30_W3")]
+    assert {r[1] for r in rows["mccraith_ch5_fig1"]} == {"world_x/M/series_long"}
+    assert plan.result_path("world_x/M/gt_median") == "results/calibration/world_x/M/gt_median.json"
+    runs = plan.runs(config, _scenes_of)
+    assert len(runs) == 5 + 2 + 1 + 1  # 5 methods, road_L6/L10, road_L30_W0.5, the series
+    assert runs["world_x/M/road_L30_W3"]["tables"] == ["mccraith_ch5_table1", "mccraith_ch5_table2",
+                                                      "mccraith_ch5_table3", "mccraith_ch5_table4"]
+    assert plan.parent_of(config, _scenes_of, "world_x", "M", "road_L6_W3") == "mccraith_ch5_table3"
+    assert plan.figure_series(config) == {"mccraith_ch5_fig1": "world_x/M/series_long"}
+    assert plan.rows(config, lambda d: ["train_000"]) == {}  # no test scene: no table rows
+    scenes = _scenes_of("world_x")
     files = plan.eval_inputs(config, scenes, "world_x", "M", "single_train")
     assert files["pred"] == ["results/depth/predictions/world_x/M/test_000.npz"]
     assert files["gt"] == ["results/prepared/world_x/test_000/cam_front_depth.npz"]
@@ -222,7 +321,9 @@ def test_plan_lists_the_jobs_as_data():
     assert files["raw"] == ["results/raw/world_x/test_000"]
     assert files["train_pred"] == [f"results/depth/predictions/world_x/M/train_00{i}.npz" for i in (0, 1)]
     assert "train_pred" not in plan.eval_inputs(config, scenes, "world_x", "M", "road_L6_W3")
-    assert plan.scene_files(config, scenes, "pred", "long") == ["results/depth/predictions/world_x/M/long_000.npz"]
+    series = plan.series_inputs(config, scenes, "world_x", "M", "long")
+    assert series["raw"] == ["results/raw/world_x/long_000"]
+    assert series["single"] == "results/calibration/world_x/M/single_train.json"
     import re
 
     for name in ("gt_median", "single_train", "road_L30_W0.5"):

@@ -1,15 +1,15 @@
 # Depth scale from the camera height: per-frame road-plane fit (McCraith ch. 5).
 #
-# calibration_eval   results/calibration/{dataset}/{mode}/{method}.json   one scaling method / road box (a child run)
-# calibration_table  results/tables/mccraith_ch5_table{1..4}.{md,csv,tex,score.json}
-# calibration_fig1   results/figures/mccraith_ch5_fig1.png (+ its summary table)
-# Inference-free on top of the depth stage's raw predictions (rule predict_depth). The methods are data:
-# config calibration.lengths / widths expanded by redsup.calib.plan.table_methods.
+# calibration_eval    results/calibration/{dataset}/{mode}/{method}.json        one scaling method / road box
+# calibration_series  results/calibration/{dataset}/{mode}/series_{split}.json  Fig. 1's per-frame scales
+# calibration_fig1    results/figures/{figure}.png                              Fig. 1 (its table: rule table)
+# Inference-free on top of the depth stage's raw predictions (rule predict_depth). Tables 1-4 and Fig. 1's
+# table go through rule table (tables.smk) with redsup.calib.plan; their rows are config
+# calibration.tables.<table id>. Camera heights and fps come from each scene's extrinsics / scene.json.
 import redsup.calib.plan as calib_plan
 
 
-CALIB = config["calibration"]
-CALIB_SPLIT = CALIB["figure_split"]
+CALIB_FIGURES = calib_plan.figure_series(config)
 
 
 rule calibration_eval:
@@ -22,6 +22,8 @@ rule calibration_eval:
     log:
         "results/logs/calibration/{dataset}/{mode}/{method}.log",
         run="results/runs/calibration/{dataset}/{mode}/{method}.json",
+    params:
+        parent=lambda wc: calib_plan.parent_of(config, scenes_of, wc.dataset, wc.mode, wc.method),
     wildcard_constraints:
         mode=r"[A-Za-z]+",
         method=calib_plan.METHOD_PATTERN,
@@ -35,48 +37,44 @@ rule calibration_eval:
         "../scripts/calibration_eval.py"
 
 
-rule calibration_table:
+rule calibration_series:
     input:
-        lambda wc: calib_plan.result_files(CALIB, wc.table),
+        unpack(
+            lambda wc: calib_plan.series_inputs(config, scenes_of(wc.dataset), wc.dataset, wc.mode, wc.split)
+        ),
     output:
-        md="results/tables/{table}.md",
-        csv="results/tables/{table}.csv",
-        tex="results/tables/{table}.tex",
-        score="results/tables/{table}.score.json",
+        "results/calibration/{dataset}/{mode}/series_{split}.json",
     log:
-        "results/logs/tables/{table}.log",
-        run="results/runs/tables/{table}.json",
+        "results/logs/calibration/{dataset}/{mode}/series_{split}.log",
+        run="results/runs/calibration/{dataset}/{mode}/series_{split}.json",
+    params:
+        parent=lambda wc: calib_plan.parent_of(config, scenes_of, wc.dataset, wc.mode, f"series_{wc.split}"),
     wildcard_constraints:
-        table="|".join(calib_plan.TABLES),
+        mode=r"[A-Za-z]+",
+        split=r"train|test|long",
     threads: 1
     resources:
-        mem_mb=1000,
+        mem_mb=2000,
         runtime=10,
     conda:
         ENV
     script:
-        "../scripts/calibration_table.py"
+        "../scripts/calibration_series.py"
 
 
 rule calibration_fig1:
     input:
-        pred=calib_plan.scene_files(config, scenes_of(CALIB["dataset"]), "pred", CALIB_SPLIT),
-        gt=calib_plan.scene_files(config, scenes_of(CALIB["dataset"]), "gt", CALIB_SPLIT),
-        road=calib_plan.scene_files(config, scenes_of(CALIB["dataset"]), "road", CALIB_SPLIT),
-        raw=calib_plan.scene_files(config, scenes_of(CALIB["dataset"]), "raw", CALIB_SPLIT),
-        single=f"results/calibration/{CALIB['dataset']}/{CALIB['mode']}/single_train.json",
+        series=lambda wc: calib_plan.result_path(CALIB_FIGURES[wc.figure]),
     output:
-        png="results/figures/mccraith_ch5_fig1.png",
-        md="results/tables/mccraith_ch5_fig1.md",
-        csv="results/tables/mccraith_ch5_fig1.csv",
-        tex="results/tables/mccraith_ch5_fig1.tex",
-        score="results/tables/mccraith_ch5_fig1.score.json",
+        png="results/figures/{figure}.png",
     log:
-        "results/logs/figures/mccraith_ch5_fig1.log",
-        run="results/runs/figures/mccraith_ch5_fig1.json",
+        "results/logs/figures/{figure}.log",
+        run="results/runs/figures/{figure}.json",
+    wildcard_constraints:
+        figure="|".join(CALIB_FIGURES) or "(?!)",
     threads: 1
     resources:
-        mem_mb=2000,
+        mem_mb=1000,
         runtime=10,
     conda:
         ENV

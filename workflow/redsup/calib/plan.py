@@ -1,15 +1,23 @@
-"""The calibration stage's jobs as data, for ``workflow/rules/calibration.smk`` (pure Python, no numpy).
+"""The calibration stage's jobs and tables as data (the table contract, redsup.tables.contract; torch-free).
 
-Each scaling method / road-box configuration is one ``calibration_eval`` job and child run; each table needs
-the methods listed by ``table_methods``. Method names are those of ``redsup.calib.methods``.
+Each table of McCraith ch. 5 is a section ``calibration.tables.<table id>`` of config.yaml, one of
+
+- ``rows: [{label, method}, ...]``  one row per scaling method (Tables 1, 2); ``method`` is a name of
+  ``redsup.calib.methods`` or ``ours`` (the road box ``calibration.length`` x ``calibration.width``);
+- ``vary: length|width, values: [...]``  one road-box row per value, the other side at its default
+  (Tables 3, 4; row label = the value as %g);
+- ``series: <split>``  the per-frame scale along the scenes of that split (Fig. 1's table).
+
+A run is ``<dataset>/<mode>/<method>`` (``series_<split>`` for a series): one ``calibration_eval`` (or
+``calibration_series``) job writing ``results/calibration/<run>.json``.
 """
 from __future__ import annotations
 
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping, Sequence
 
-TABLES = ("mccraith_ch5_table1", "mccraith_ch5_table2", "mccraith_ch5_table3", "mccraith_ch5_table4")
-FIGURE = "mccraith_ch5_fig1"
 METHOD_PATTERN = r"gt_median|single_train|single_test|fixed_plane|road_L[0-9.]+_W[0-9.]+"
+SERIES_PREFIX = "series_"
+VARY_INDEX = {"length": "Length (m)", "width": "Width (m)"}
 
 
 def road_method(length: float, width: float) -> str:
@@ -17,20 +25,82 @@ def road_method(length: float, width: float) -> str:
     return f"road_L{float(length):g}_W{float(width):g}"
 
 
-def table_methods(cal: Mapping) -> dict[str, list[str]]:
-    """Table id -> the methods it needs (Table 3 varies the length at the default width, Table 4 the width)."""
-    ours = road_method(cal["length"], cal["width"])
-    return {
-        "mccraith_ch5_table1": ["single_train", "single_test", "fixed_plane", ours, "gt_median"],
-        "mccraith_ch5_table2": ["gt_median", ours],
-        "mccraith_ch5_table3": [road_method(v, cal["width"]) for v in cal["lengths"]],
-        "mccraith_ch5_table4": [road_method(cal["length"], v) for v in cal["widths"]],
-    }
+def _method(name: str, cal: Mapping) -> str:
+    return road_method(cal["length"], cal["width"]) if name == "ours" else name
 
 
-def result_files(cal: Mapping, table: str) -> list[str]:
-    """The per-method result files a table reads."""
-    return [f"results/calibration/{cal['dataset']}/{cal['mode']}/{m}.json" for m in table_methods(cal)[table]]
+def table_methods(cal: Mapping) -> dict[str, list[tuple[str, str]]]:
+    """Table id -> [(row label, method)] of every method table configured in ``cal['tables']``."""
+    out = {}
+    for table, t in cal["tables"].items():
+        if "rows" in t:
+            out[table] = [(str(r["label"]), _method(r["method"], cal)) for r in t["rows"]]
+        elif "vary" in t:
+            fixed = {"length": cal["length"], "width": cal["width"]}
+            out[table] = [(f"{float(v):g}", road_method(**{**fixed, t["vary"]: v})) for v in t["values"]]
+    return out
+
+
+# row labels of a series table (redsup.calib.report.fig1_table)
+FIG1_GT_ROW = "per-frame GT scaling factor"
+FIG1_SINGLE_ROW = "GT Single Scaling (training set)"
+FIG1_OURS_ROW = "Ours (road plane, per frame)"
+FIG1_ROAD_ROW = "GT scaling on the road-box pixels (diagnostic)"
+
+
+def series_rows() -> list[str]:
+    return [FIG1_GT_ROW, FIG1_SINGLE_ROW, FIG1_OURS_ROW, FIG1_ROAD_ROW]
+
+
+def run_name(cal: Mapping, method: str) -> str:
+    return f"{cal['dataset']}/{cal['mode']}/{method}"
+
+
+def split_run(run: str) -> tuple[str, str, str]:
+    """(dataset, mode, method) of a run name."""
+    dataset, mode, method = run.split("/")
+    return dataset, mode, method
+
+
+def rows(config: Mapping, scenes_of: Callable[[str], list[str]]) -> dict[str, list[tuple[str, str, None]]]:
+    """table id -> [(row label, run, None)]; tables whose dataset has no scene of the needed split are left out."""
+    cal = config["calibration"]
+    scenes = list(scenes_of(cal["dataset"]))
+
+    def has(split):
+        return any(s.startswith(f"{split}_") for s in scenes)
+
+    out: dict[str, list] = {}
+    if has("test"):
+        for table, methods in table_methods(cal).items():
+            out[table] = [(label, run_name(cal, m), None) for label, m in methods]
+    for table, t in cal["tables"].items():
+        if "series" in t and has(t["series"]) and has("test"):
+            run = run_name(cal, SERIES_PREFIX + t["series"])
+            out[table] = [(label, run, None) for label in series_rows()]
+    return out
+
+
+def runs(config: Mapping, scenes_of) -> dict[str, dict]:
+    """run -> {"dataset", "mode", "method", "tables": the tables reading it (registry order of config)}."""
+    out: dict[str, dict] = {}
+    for table, rs in rows(config, scenes_of).items():
+        for _, run, _ in rs:
+            dataset, mode, method = split_run(run)
+            out.setdefault(run, {"dataset": dataset, "mode": mode, "method": method, "tables": []})
+            if table not in out[run]["tables"]:
+                out[run]["tables"].append(table)
+    return out
+
+
+def result_path(run: str) -> str:
+    return f"results/calibration/{run}.json"
+
+
+def parent_of(config: Mapping, scenes_of, dataset: str, mode: str, method: str) -> str:
+    """The MLflow parent of one job: the first table that reads it (``mccraith_ch5_table1`` if none does)."""
+    run = runs(config, scenes_of).get(f"{dataset}/{mode}/{method}")
+    return run["tables"][0] if run else "mccraith_ch5_table1"
 
 
 def scene_files(config: Mapping, scenes: Iterable[str], kind: str, split: str, dataset: str | None = None,
@@ -52,11 +122,47 @@ def scene_files(config: Mapping, scenes: Iterable[str], kind: str, split: str, d
 
 
 def eval_inputs(config: Mapping, scenes: Iterable[str], dataset: str, mode: str, method: str) -> dict[str, list[str]]:
-    """Inputs of one ``calibration_eval`` job: the test scenes' predictions, ground truth and road masks, plus
-    the training scenes' predictions and ground truth for the training-set single scale."""
+    """Inputs of one ``calibration_eval`` job: the test scenes' predictions, ground truth, road masks and raw
+    folders, plus the training scenes' predictions and ground truth for the training-set single scale."""
     scenes = list(scenes)
     files = {k: scene_files(config, scenes, k, "test", dataset, mode) for k in ("pred", "gt", "road", "raw")}
     if method == "single_train":
         files["train_pred"] = scene_files(config, scenes, "pred", "train", dataset, mode)
         files["train_gt"] = scene_files(config, scenes, "gt", "train", dataset, mode)
     return files
+
+
+def series_inputs(config: Mapping, scenes: Iterable[str], dataset: str, mode: str, split: str) -> dict:
+    """Inputs of one ``calibration_series`` job: the split's scenes and the training-set single scale."""
+    scenes = list(scenes)
+    files = {k: scene_files(config, scenes, k, split, dataset, mode) for k in ("pred", "gt", "road", "raw")}
+    files["single"] = result_path(f"{dataset}/{mode}/single_train")
+    return files
+
+
+def figure_series(config: Mapping) -> dict[str, str]:
+    """Figure id -> the series run it plots (every table section with ``series:``)."""
+    cal = config["calibration"]
+    return {t: run_name(cal, SERIES_PREFIX + s["series"]) for t, s in cal["tables"].items() if "series" in s}
+
+
+# ------------------------------------------------------------------------------------ the table
+def table_frame(table_id: str, config: Mapping, rows: Sequence[tuple], results: Mapping[str, Mapping]):
+    """Our table: method rows with a paired bootstrap over the common test frames, or a series summary."""
+    from redsup.calib import report
+    from redsup.tables.contract import TableFrame
+
+    cal = config["calibration"]
+    tcfg = cal["tables"][table_id]
+    if "series" in tcfg:
+        (_, run, _), = {r[1]: r for r in rows}.values()
+        ours, note = report.series_frame(results[run], cal, config.get("profile"))
+        return TableFrame(ours, {}, note)
+    ours, noise, info = report.method_frame([(label, results[run]) for label, run, _ in rows],
+                                            index=VARY_INDEX.get(tcfg.get("vary"), "Method"))
+    what = str(tcfg.get("note", "")).format(length=float(cal["length"]), width=float(cal["width"]))
+    return TableFrame(ours, noise, report.method_note(info, cal, config.get("profile"), what))
+
+
+__all__ = ["METHOD_PATTERN", "road_method", "table_methods", "rows", "runs", "result_path", "table_frame",
+           "parent_of", "scene_files", "eval_inputs", "series_inputs", "figure_series"]

@@ -1,8 +1,10 @@
 """McCraith ch. 5 tables and Fig. 1 from the per-method results of ``redsup.calib.methods.evaluate_scenes``.
 
-Rows and columns are named as in ``paper_values.csv``; every table adds, beside the seven Eigen metrics,
-``scale err`` (median over frames of |scale / per-frame GT scale - 1|), ``frames`` (evaluated) and
-``skipped`` (frames the method could not scale, with the reasons in the run record and the caption).
+Rows and columns are named as in ``paper_values.csv``; every method table adds, beside the seven Eigen
+metrics, ``scale err`` (median over frames of |scale / per-frame GT scale - 1|), ``frames`` (the evaluable
+test frames, the same for every row) and ``coverage`` (fraction of them where the method's own estimate
+succeeded; the others carry the fallback scale, redsup.calib.methods). Each metric cell has a paired
+bootstrap record over those frames (redsup.tables.noise.bootstrap).
 """
 from __future__ import annotations
 
@@ -11,34 +13,24 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 import pandas as pd
 
-from redsup.calib.methods import road_method
+from redsup.calib.methods import per_frame
+from redsup.calib.plan import FIG1_GT_ROW, FIG1_OURS_ROW, FIG1_ROAD_ROW, FIG1_SINGLE_ROW  # noqa: F401
 from redsup.depth.evaluation import METRICS
 
 COLUMNS = {"abs_rel": "Abs Rel", "sq_rel": "Sq Rel", "rmse": "RMSE", "rmse_log": "RMSE log", "a1": "δ < 1.25",
            "a2": "δ < 1.25^2", "a3": "δ < 1.25^3"}
-TABLE1_ROWS = {
-    "single_train": "(a) GT Single Scaling (training set)",
-    "single_test": "(b) GT Single Scaling (testing set)",
-    "fixed_plane": "(c) Fixed road plane",
-    "ours": "(d) Ours",
-    "gt_median": "GT Scaling (per-frame median, reference)",
-}
-TABLE2_ROWS = {"gt_median": "Godard et al. [2019]", "ours": "Ours"}
-FIG1_GT_ROW = "per-frame GT scaling factor"
-FIG1_SINGLE_ROW = "GT Single Scaling (training set)"
-FIG1_OURS_ROW = "Ours (road plane, per frame)"
-FIG1_ROAD_ROW = "GT scaling on the road-box pixels (diagnostic)"
 
 
 def metrics_row(result: Mapping) -> dict:
     """One table row from a method result: the seven metrics (NaN when no frame was evaluated), scale
-    error and frame counts."""
+    error, evaluated frames and coverage."""
     s = result["summary"]
     row = {COLUMNS[k]: float(s[k]) if k in s else float("nan") for k in METRICS}
     err = s.get("scale_rel_err")
     row["scale err"] = float(err) if err is not None else float("nan")
     row["frames"] = int(s["n_frames"])
-    row["skipped"] = int(s["n_skipped"])
+    cov = s.get("coverage")
+    row["coverage"] = float(cov) if cov is not None else float("nan")
     return row
 
 
@@ -48,40 +40,65 @@ def _frame(rows: Mapping[str, Mapping], index_name: str) -> pd.DataFrame:
     return df
 
 
-def table1(results: Mapping[str, Mapping], length: float, width: float) -> pd.DataFrame:
-    """Ch. 5 Table 1: results keyed by method name (``road_L<length>_W<width>`` is row (d))."""
-    keys = {k: (road_method(length, width) if k == "ours" else k) for k in TABLE1_ROWS}
-    return _frame({label: metrics_row(results[keys[k]]) for k, label in TABLE1_ROWS.items()}, "Method")
+def method_frame(rows: Sequence[tuple[str, Mapping]], index: str = "Method") -> tuple[pd.DataFrame, dict, dict]:
+    """(ours, noise, info) of a method table: ``rows`` = [(label, method result)]. Every row must have
+    been evaluated on the same frames (ValueError otherwise); noise = a bootstrap record per metric cell
+    over those frames (paired across rows: same units). info: frames, failed fits and reasons per row."""
+    from redsup.tables.noise import bootstrap
+
+    units = None
+    table, noise, info = {}, {}, {"frames": 0, "failed": {}, "not_evaluable": []}
+    for label, result in rows:
+        these = sorted(per_frame(result, "abs_rel"))
+        if units is None:
+            units = these
+            info["frames"] = len(these)
+            info["not_evaluable"] = list(result.get("not_evaluable", []))
+        elif these != units:
+            raise ValueError(f"row {label!r} ({result['method']}) is evaluated on {len(these)} frames, the first "
+                             f"row on {len(units)}: every row of a table must average the same frames")
+        table[label] = metrics_row(result)
+        if these:
+            noise[label] = {COLUMNS[k]: bootstrap(per_frame(result, k)) for k in METRICS}
+        if result.get("failed"):
+            info["failed"][label] = list(result["failed"])
+    return _frame(table, index), noise, info
 
 
-def table2(results: Mapping[str, Mapping], length: float, width: float) -> pd.DataFrame:
-    """Ch. 5 Table 2, our rows: the GT-median-scaled model (the thesis' 'Godard et al. [2019]' row, GT@Test)
-    and the road-plane calibrated model (Ours, no LiDAR at test time)."""
-    keys = {"gt_median": "gt_median", "ours": road_method(length, width)}
-    return _frame({label: metrics_row(results[keys[k]]) for k, label in TABLE2_ROWS.items()}, "Method")
+def method_note(info: Mapping, cal: Mapping, profile, what: str = "", limit: int = 2) -> str:
+    """Caption note: data, protocol, the common frames, the fallback and the failed fits per row."""
+    fallback = {"hold": "the nearest successful frame's scale in the same scene (the raw output, scale 1, "
+                        "when none succeeded)",
+                "raw": "the raw network output (scale 1)"}[cal.get("fallback", "hold")]
+    parts = [f"Ours: {cal['dataset']}, depth model {cal['mode']}, profile {profile}"]
+    if what:
+        parts.append(what.rstrip("."))
+    parts.append(f"every row averages the same {info['frames']} test frames (paired bootstrap ± over them); "
+                 "metrics not median-scaled except the GT scaling rows; scale err = median |scale / per-frame "
+                 "GT scale - 1|; coverage = fraction of frames where the method's own estimate succeeded, "
+                 f"the others use {fallback} (the thesis gives no fallback)")
+    if info["not_evaluable"]:
+        parts.append(f"{len(info['not_evaluable'])} frame(s) without valid ground truth left out for every row "
+                     f"(e.g. {info['not_evaluable'][0]})")
+    for label, failed in info["failed"].items():
+        more = f"; +{len(failed) - limit} more" if len(failed) > limit else ""
+        parts.append(f"{label}: {len(failed)} failed fit(s) ({'; '.join(failed[:limit])}{more})")
+    return "; ".join(parts)
 
 
-def sweep_table(results: Mapping[str, Mapping], values: Sequence[float], *, vary: str, length: float, width: float
-                ) -> pd.DataFrame:
-    """Ch. 5 Table 3 (``vary="length"``, width fixed) or Table 4 (``vary="width"``, length fixed)."""
-    if vary not in ("length", "width"):
-        raise ValueError(f"vary must be 'length' or 'width', got {vary!r}")
-    rows = {}
-    for v in values:
-        name = road_method(v, width) if vary == "length" else road_method(length, v)
-        rows[f"{float(v):g}"] = metrics_row(results[name])
-    return _frame(rows, "Length (m)" if vary == "length" else "Width (m)")
-
-
-def skipped_note(results: Mapping[str, Mapping], labels: Mapping[str, str], limit: int = 3) -> str:
-    """Caption text: per row, how many frames were skipped and the first reasons."""
-    parts = []
-    for name, label in labels.items():
-        skipped = results[name]["skipped"]
-        if skipped:
-            more = f"; +{len(skipped) - limit} more" if len(skipped) > limit else ""
-            parts.append(f"{label}: {len(skipped)} frame(s) skipped ({'; '.join(skipped[:limit])}{more})")
-    return ("Skipped frames: " + " | ".join(parts)) if parts else "No frame skipped"
+def series_frame(series: Mapping, cal: Mapping, profile) -> tuple[pd.DataFrame, str]:
+    """(Fig. 1's table, caption note) from a ``calibration_series`` result."""
+    frames = series["frames"]
+    df = fig1_table([f["gt"] for f in frames], [f["ours"] for f in frames], series["single_scale"],
+                    [f["road_gt"] for f in frames])
+    skipped = series.get("skipped", [])
+    names = list(dict.fromkeys(f["scene"] for f in frames))
+    note = (f"Ours: {cal['dataset']} {', '.join(names)} ({len(frames)} frames), depth model {cal['mode']}, profile "
+            f"{profile}; the scale is in metres per network unit of our model (the thesis' KITTI model has its "
+            f"own unit); ours = road plane |X| < {float(cal['width']):g} m, Z < {float(cal['length']):g} m, camera "
+            f"height from each scene's extrinsics. "
+            + (f"Skipped: {len(skipped)} ({'; '.join(skipped[:3])})" if skipped else "No frame skipped"))
+    return df, note
 
 
 # ---------------------------------------------------------------------------------------------- Fig. 1
