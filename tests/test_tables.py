@@ -351,3 +351,12 @@ def test_bootstrap_statistic_and_spread_display(tmp_path):
     assert "| 10^-1 | 0.100 ± 0.010 | 0.097 |" in (tmp_path / "t.md").read_text()
     df = pd.read_csv(tmp_path / "t.csv").set_index("row")
     assert df.at["10^-1", "Abs Rel (ours) std"] == pytest.approx(0.01)
+
+
+def test_too_few_units_and_float_ties_are_inconclusive():
+    one = tables.noise.bootstrap({"f0": 0.40})
+    other = tables.noise.bootstrap({"f0": 0.39})
+    lo, hi, how = tables.noise.difference_interval(0.39, 0.40, other, one)
+    assert math.isnan(lo) and "fewer than 3 units" in how
+    assert tables.noise.verdict_of_interval(*tables.noise.difference_interval(0.3992, 0.3992 + 1e-12)[:2]) \
+        == "inconclusive"

@@ -217,7 +217,7 @@ def table_note(config: Mapping, table_cfg: Mapping, info: Mapping) -> str:
     if groups:
         parts.append("frames averaged per comparison group (the same frames for every row of a group): "
                      + ", ".join(f"{g or 'all'} {n}" for g, n in groups.items()))
-    parts.append("± = bootstrap standard error over those frames (one trained model per row: no seed spread)")
+    parts.append("one trained model per row: ± is the bootstrap standard error over those frames, no seed spread")
     reasons = info.get("reasons", [])
     if reasons:
         parts.append(f"{len(reasons)} skip reason(s), e.g. '{reasons[0]}' (all in the log)")

@@ -23,6 +23,8 @@ import numpy as np
 
 N_BOOTSTRAP = 200
 LEVEL = 0.95
+MIN_UNITS = 3  # a bootstrap over fewer units says nothing about the noise: the comparison is inconclusive
+REL_TIE = 1e-9  # differences below this (relative) are floating-point ties
 # two-sided 97.5 % quantiles of Student's t by degrees of freedom (Welch); beyond 30: normal
 _T975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262,
          10: 2.228, 12: 2.179, 15: 2.131, 20: 2.086, 30: 2.042}
@@ -62,7 +64,8 @@ def bootstrap(per_unit: Mapping | None = None, *, unit_ids: Sequence | None = No
         per_unit = {u: None for u in ids}
     else:
         raise ValueError("bootstrap: give per_unit, or unit_ids and statistic")
-    return {"kind": "bootstrap", "values": [float(r) for r in reps], "units": units_digest(list(per_unit))}
+    return {"kind": "bootstrap", "values": [float(r) for r in reps], "units": units_digest(list(per_unit)),
+            "n_units": len(per_unit)}
 
 
 def seeds(values: Sequence[float]) -> dict:
@@ -106,10 +109,16 @@ def t975(df: float | None) -> float:
 
 def difference_interval(a: float, b: float, noise_a: Mapping | None = None,
                         noise_b: Mapping | None = None) -> tuple[float, float, str]:
-    """(low, high, method) of the 95 % interval of ``a - b``."""
+    """(low, high, method) of the 95 % interval of ``a - b`` (NaN when the noise cannot be measured: a
+    bootstrap over fewer than MIN_UNITS units)."""
     d = a - b
     if not (math.isfinite(a) and math.isfinite(b)):
         return math.nan, math.nan, "non-finite"
+    if abs(d) <= REL_TIE * max(1.0, abs(a), abs(b)):
+        d = 0.0  # a floating-point tie
+    few = [n for n in (noise_a, noise_b) if n and n["kind"] == "bootstrap" and n.get("n_units", MIN_UNITS) < MIN_UNITS]
+    if few:
+        return math.nan, math.nan, f"bootstrap over fewer than {MIN_UNITS} units"
     if (noise_a and noise_b and noise_a["kind"] == noise_b["kind"] == "bootstrap"
             and noise_a.get("units") == noise_b.get("units")
             and len(noise_a["values"]) == len(noise_b["values"])):
