@@ -98,9 +98,9 @@ def result_path(run: str) -> str:
 
 
 def parent_of(config: Mapping, scenes_of, dataset: str, mode: str, method: str) -> str:
-    """The MLflow parent of one job: the first table that reads it (``mccraith_ch5_table1`` if none does)."""
+    """The MLflow parent of one job: the first table that reads it (else the stage's first table)."""
     run = runs(config, scenes_of).get(f"{dataset}/{mode}/{method}")
-    return run["tables"][0] if run else "mccraith_ch5_table1"
+    return run["tables"][0] if run else next(iter(config["calibration"]["tables"]), "calibration")
 
 
 def scene_files(config: Mapping, scenes: Iterable[str], kind: str, split: str, dataset: str | None = None,
