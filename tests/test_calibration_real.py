@@ -10,7 +10,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from conftest import ROOT
+import yaml
+
+from conftest import ROOT, run_snakemake
 from redsup import geometry, sceneio
 from redsup.adapters import adapt_scene, scene_ids
 from redsup.calib import inputs, methods
@@ -121,3 +123,15 @@ def test_calibration_runs_on_the_adapted_kitti_raw_scene(scene, tmp_path):
     assert wrong["frames"][0]["scale"] == pytest.approx(50.0, rel=1e-3)
     gt_med = methods.evaluate_method("gt_median", test, cal, heights=heights, seed=0)
     assert sorted(methods.per_frame(gt_med, "abs_rel")) == sorted(methods.per_frame(result, "abs_rel"))
+
+
+@pytest.mark.workflow
+def test_dag_calibrates_a_kitti_raw_dataset(tmp_path):
+    """Dry run: calibration.dataset set to an adapted KITTI raw dataset plans calibration_eval on its scene
+    (the raw scene folder, hence its extrinsics, is an input; no world domain is consulted)."""
+    cfg = tmp_path / "real.yaml"
+    cfg.write_text(yaml.safe_dump({"datasets": {"real_raw": raw_spec()}, "calibration": {"dataset": "real_raw"}}))
+    target = "results/calibration/real_raw/M/road_L30_W3.json"
+    out = run_snakemake(tmp_path / "w", "-n", target, "--configfile", str(cfg)).stdout
+    assert any(line.split()[:2] == ["calibration_eval", "1"] for line in out.splitlines()), out[-3000:]
+    assert f"results/raw/real_raw/{RAW_SCENE}" in out and "world_scene" not in out
