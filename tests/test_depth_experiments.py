@@ -49,7 +49,8 @@ def test_rows_of_every_table_at_default(cfg):
     labels = {r.label for r in rows["mccraith_ch4_table5"]}
     assert labels >= {"ours | M", "ours | S", "ours | MS", "Monodepth V2 [9] | S"}
     assert [r.label for r in rows["mccraith_ch4_table7"]] == ["baseline | 0", "Ours | 20", "Ours | 50"]
-    assert len(rows["galteland_table5_1"]) == 9 and rows["galteland_table4_4"][1].label == "Front+Back"
+    assert len(rows["galteland_table5_1"]) == 27  # 9 rows x 3 seeds
+    assert [r.label for r in rows["galteland_table4_4"]] == ["Front only"] * 3 + ["Front+Back"] * 3
     available, cameras = plan._available(cfg, _scenes_of(cfg))
     models = configs.trained_models(cfg["depth"], {d: a["train"] for d, a in available.items()}, cameras)
     assert set(models) == {"world_kitti/M", "world_kitti/S", "world_kitti/MS", "world_cityscapes/M", "world_lyft/M",
@@ -97,7 +98,7 @@ def test_tables_shrink_with_missing_data(cfg):
     assert not rows["mccraith_ch4_fig4"]
     assert not any(r.label.startswith("Odometry") for r in rows["mccraith_ch4_table6"])
     assert {r.label for r in rows["mccraith_ch4_table5"]} == {"ours | M", "Monodepth V2 [9] | M"}
-    assert len(rows["galteland_table5_1"]) == 4
+    assert len(rows["galteland_table5_1"]) == 4 * 3
 
 
 def test_labels():
@@ -214,3 +215,27 @@ def test_stereo_models_use_the_fixed_baseline_factor():
     assert stereo.metrics["abs_rel"] == pytest.approx(0.08, rel=1e-4) and stereo.metrics["median_ratio"] == 1.0
     mono = experiments.evaluate_depth(gt, pred, EVAL, False)
     assert mono.metrics["abs_rel"] == pytest.approx(0.0, abs=1e-6) and mono.metrics["scale"] == pytest.approx(5.0)
+
+
+def test_seed_rows_are_averaged_with_their_spread(cfg):
+    """A row whose model has several training seeds shows the seed mean; its noise record holds the seeds."""
+    def result(value):
+        return {"records": [{"sequence": "s", "frame": f, "step": 0, "seconds": 0.1,
+                             "metrics": {k: value + 0.01 * f for k in configs.METRIC_COLUMNS}} for f in range(5)]}
+
+    rows = [("Front only", "a0", 0), ("Front only", "a1", 0), ("Front only", "a2", 0),
+            ("Front+Back", "b0", 0), ("Front+Back", "b1", 0), ("Front+Back", "b2", 0)]
+    results = {"a0": result(0.20), "a1": result(0.22), "a2": result(0.24),
+               "b0": result(0.50), "b1": result(0.40), "b2": result(0.60)}
+    frame = plan.table_frame("galteland_table4_4", cfg, rows, results)
+    assert frame.ours.at["Front only", "Abs Rel"] == pytest.approx(0.24)  # mean of 0.22, 0.24, 0.26
+    assert frame.ours.at["Front+Back", "Abs Rel"] == pytest.approx(0.52)
+    rec = frame.noise["Front+Back"]["Abs Rel"]
+    assert rec["kind"] == "seeds" and rec["values"] == pytest.approx([0.52, 0.42, 0.62])
+    assert "3 seeds" in frame.note
+    # the seed model ids and their checkpoints
+    assert configs.seed_models("world_lyft/M", 3) == ["world_lyft/M", "world_lyft/M/seed1", "world_lyft/M/seed2"]
+    assert configs.parse_model("world_lyft/M_frontback/seed2") == ("world_lyft", "M_frontback", 2)
+    with pytest.raises(ValueError, match="not a depth model id"):
+        configs.parse_model("world_lyft/M/2")
+    assert plan.rows(cfg, _scenes_of(cfg))["galteland_table4_4"][1][1].startswith("baseline_world_lyft-M-seed1_")

@@ -1,6 +1,6 @@
 # Self-supervised depth, test-time instance adaptation, Galteland's tables (McCraith ch. 4).
 #
-# train_depth    results/depth/models/{dataset}/{mode}.pt           one model (M, S, MS, M_frontback, ...)
+# train_depth    results/depth/models/{dataset}/{mode}[/seed{k}].pt one model (M, S, MS, M_frontback, ...) per seed
 # predict_depth  results/depth/predictions/{dataset}/{mode}/{scene}.npz   raw network depth of every frame
 # depth_eval     results/depth/eval/{run}.json                      one configuration (a child run)
 # depth_figure   results/figures/<id>.png                           Figs. 4 and 5 (their tables: rule table)
@@ -12,19 +12,25 @@ import redsup.depth.configs as depth_configs
 import redsup.depth.plan as depth_plan
 
 DEPTH_RUNS = depth_plan.runs(config, scenes_of)
+DEPTH_MODELS = depth_plan.models(config, scenes_of)  # <dataset>/<mode>[/seed<k>]
 DEPTH_FIGURES = [t for t in FIGURE_IDS if "figure" in config["depth"]["tables"].get(t, {})]
+
+
+def _train_inputs(wildcards):
+    dataset, mode, _ = depth_configs.parse_model(wildcards.model)
+    return depth_configs.train_inputs(config, dataset, mode, scenes_of(dataset))
 
 
 rule train_depth:
     input:
-        unpack(lambda wc: depth_configs.train_inputs(config, wc.dataset, wc.mode, scenes_of(wc.dataset))),
+        unpack(_train_inputs),
     output:
-        "results/depth/models/{dataset}/{mode}.pt",
+        "results/depth/models/{model}.pt",
     log:
-        "results/logs/depth/models/{dataset}/{mode}.log",
-        run="results/runs/depth/models/{dataset}/{mode}.json",
+        "results/logs/depth/models/{model}.log",
+        run="results/runs/depth/models/{model}.json",
     wildcard_constraints:
-        mode=r"[A-Za-z0-9_]+",
+        model="|".join(re.escape(m) for m in DEPTH_MODELS) or "(?!)",
     threads: 1
     resources:
         mem_mb=3000,

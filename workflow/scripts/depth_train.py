@@ -8,6 +8,7 @@ import zlib  # noqa: E402
 import torch  # noqa: E402
 
 from redsup.depth import checkpoint, data, networks, training  # noqa: E402
+from redsup.depth.configs import parse_model  # noqa: E402
 from redsup.depth.plan import model_parent  # noqa: E402
 from redsup.depth.experiments import loss_settings  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
@@ -15,19 +16,21 @@ from redsup.runlog import child_run  # noqa: E402
 sm = snakemake  # noqa: F821
 torch.set_num_threads(sm.threads)
 cfg = sm.config["depth"]
-dataset, mode = sm.wildcards.dataset, sm.wildcards.mode
+dataset, mode, seed_index = parse_model(sm.wildcards.model)
 mode_cfg = cfg["modes"][mode]
 sources = list(mode_cfg["sources"])
 device = cfg["device"] if cfg["device"] != "auto" else ("cuda" if torch.cuda.is_available() else "cpu")
-seed = int(sm.config["seed"]) + zlib.crc32(f"{dataset}/{mode}".encode()) % 100000
+seed = int(sm.config["seed"]) + zlib.crc32(f"{dataset}/{mode}".encode()) % 100000  # seed index 0
+seed += 0 if seed_index == 0 else zlib.crc32(sm.wildcards.model.encode()) % 100000
 init_disparity = mode_cfg.get("init_disparity", cfg["model"].get("init_disparity"))
 steps = next((m.get("steps") for m in cfg["models"] if m["dataset"] == dataset and m["mode"] == mode), None)  # override
-params = {"dataset": dataset, "mode": mode, "sources": sources, "cameras": mode_cfg["cameras"], "seed": seed,
+params = {"dataset": dataset, "mode": mode, "seed_index": seed_index, "sources": sources,
+          "cameras": mode_cfg["cameras"], "seed": seed,
           "device": device, "model": {**cfg["model"], "init_disparity": init_disparity}, "loss": cfg["loss"],
           "train": {**cfg["train"], **({"steps": steps} if steps else {})}}
 
 parent = model_parent(sm.config, f"{dataset}/{mode}")
-with child_run(sm.log.run, parent, f"train {dataset} {mode}", rule=sm.rule, wildcards=dict(sm.wildcards),
+with child_run(sm.log.run, parent, f"train {sm.wildcards.model}", rule=sm.rule, wildcards=dict(sm.wildcards),
                config=sm.config, params=params) as run:
     seqs = []
     for cam in mode_cfg["cameras"]:

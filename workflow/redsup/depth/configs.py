@@ -11,6 +11,7 @@ MLflow child run (parent: the first table that uses it, tagged with every table 
 """
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping, Sequence as Seq
 from dataclasses import asdict, dataclass, field
 
@@ -114,10 +115,33 @@ def mode_sources(depth_cfg: Mapping, mode: str) -> tuple[str, ...]:
     return tuple(depth_cfg["modes"][mode]["sources"])
 
 
+def seed_models(model: str, n_seeds: int) -> list[str]:
+    """Model ids of the training seeds of ``<dataset>/<mode>``: itself (seed 0), then ``.../seed<k>``."""
+    return [model] + [f"{model}/seed{k}" for k in range(1, n_seeds)]
+
+
+def parse_model(model: str) -> tuple[str, str, int]:
+    """(dataset, mode, seed index) of a model id ``<dataset>/<mode>[/seed<k>]``."""
+    parts = model.split("/")
+    if len(parts) == 2:
+        return parts[0], parts[1], 0
+    if len(parts) == 3 and re.fullmatch(r"seed[1-9][0-9]*", parts[2]):
+        return parts[0], parts[1], int(parts[2][4:])
+    raise ValueError(f"not a depth model id: {model!r} (<dataset>/<mode>[/seed<k>])")
+
+
+def n_seeds(depth_cfg: Mapping, model: str) -> int:
+    """Configured training seeds of ``<dataset>/<mode>``."""
+    dataset, mode, _ = parse_model(model)
+    return next((int(m.get("seeds", 1)) for m in depth_cfg["models"]
+                 if m["dataset"] == dataset and m["mode"] == mode), 1)
+
+
 def trained_models(depth_cfg: Mapping, train_scenes: Mapping[str, int],
                    cameras: Mapping[str, Seq[str]] | None = None) -> list[str]:
     """``<dataset>/<mode>`` of every configured model whose dataset has training scenes and the cameras the
-    mode needs (``cameras``: dataset -> prepared cameras; stereo needs ``cam_front_right``)."""
+    mode needs (``cameras``: dataset -> prepared cameras; stereo needs ``cam_front_right``). Seeds beyond the
+    first are not listed (``seed_models``)."""
     out = []
     for m in depth_cfg["models"]:
         mode = depth_cfg["modes"][m["mode"]]
@@ -190,7 +214,7 @@ def split_of(scenes: Seq[str], split: str) -> list[str]:
 
 def train_inputs(config: Mapping, dataset: str, mode: str, scenes: Seq[str]) -> dict[str, list[str]]:
     """Inputs of ``train_depth``: the raw scenes (ego poses, extrinsics) and the prepared images of every
-    camera the mode trains on (``stereo``: the partner images)."""
+    camera the mode trains on (``stereo``: the partner images). ``mode`` without the seed part."""
     mode_cfg = config["depth"]["modes"][mode]
     scenes = split_of(scenes, "train")
     files = {"scenes": [f"results/raw/{dataset}/{s}" for s in scenes]}

@@ -25,8 +25,11 @@ import itertools
 import re
 from collections.abc import Callable, Mapping, Sequence
 
+from dataclasses import replace
+
 from redsup.depth.configs import (METRIC_COLUMNS, EvalSpec, Row, eval_inputs, groups_label, lr_label,
-                                  mode_sources, plan as plan_runs, trained_models)
+                                  mode_sources, n_seeds, parse_model, plan as plan_runs, seed_models,
+                                  trained_models)
 
 STAGES = ("depth", "galteland")
 ROW_FIELDS = ("kind", "dataset", "mode", "test", "split", "frames", "sources", "groups", "lr", "steps", "step",
@@ -123,8 +126,14 @@ def _available(config: Mapping, scenes_of: Callable[[str], list[str]]) -> tuple[
     return available, cameras
 
 
+def with_seeds(rows: Sequence[Row], depth_cfg: Mapping) -> list[Row]:
+    """Each row once per training seed of its model (same label: the table shows mean ± std over seeds)."""
+    return [replace(r, spec=replace(r.spec, model=m)) for r in rows
+            for m in seed_models(r.spec.model, n_seeds(depth_cfg, r.spec.model))]
+
+
 def table_rows(config: Mapping, scenes_of: Callable[[str], list[str]]) -> dict[str, list[Row]]:
-    """Rows of every depth table that can be built with the data and models at hand."""
+    """Rows of every depth table that can be built with the data and models at hand, once per seed."""
     depth_cfg = config["depth"]
     available, cameras = _available(config, scenes_of)
     models = set(trained_models(depth_cfg, {d: s["train"] for d, s in available.items()}, cameras))
@@ -133,7 +142,7 @@ def table_rows(config: Mapping, scenes_of: Callable[[str], list[str]]) -> dict[s
         ds, split = row.spec.data.split("/")
         return row.spec.model in models and available.get(ds, {}).get(split, 0) > 0
 
-    return {t: [r for r in expand_rows(t, depth_cfg) if ok(r)]
+    return {t: with_seeds([r for r in expand_rows(t, depth_cfg) if ok(r)], depth_cfg)
             for t in _tables_of_stage() if t in depth_cfg["tables"]}
 
 
@@ -169,10 +178,19 @@ def result_path(run: str) -> str:
 
 
 def model_tables(config: Mapping, model: str) -> list[str]:
-    """The tables (registry order) whose rows use ``model`` (``<dataset>/<mode>``): its runs' parents."""
+    """The tables (registry order) whose rows use ``model`` (``<dataset>/<mode>[/seed<k>]``)."""
     d = config["depth"]
-    return [t for t in _tables_of_stage() if t in d["tables"] and any(r.spec.model == model
-                                                                      for r in expand_rows(t, d))]
+    dataset, mode, _ = parse_model(model)
+    return [t for t in _tables_of_stage() if t in d["tables"]
+            and any(r.spec.model == f"{dataset}/{mode}" for r in expand_rows(t, d))]
+
+
+def models(config: Mapping, scenes_of) -> list[str]:
+    """Every model id to train (each seed), for the train_depth rule's wildcard."""
+    available, cameras = _available(config, scenes_of)
+    d = config["depth"]
+    base = trained_models(d, {k: v["train"] for k, v in available.items()}, cameras)
+    return [m for b in base for m in seed_models(b, n_seeds(d, b))]
 
 
 def model_parent(config: Mapping, model: str) -> str:
@@ -188,20 +206,46 @@ def eval_files(config: Mapping, run: Mapping, scenes_of) -> dict:
 
 
 def table_frame(table_id: str, config: Mapping, rows: Sequence[tuple], results: Mapping[str, Mapping]):
-    """Our table with a paired bootstrap over the common frames of each comparison group."""
+    """Our table: a paired bootstrap over the common frames of each comparison group; a row whose model has
+    several training seeds (several runs under one label) is the mean over seeds with their spread."""
+    import numpy as np
+
     from redsup.depth import reporting
+    from redsup.tables import noise as noise_lib
     from redsup.tables.contract import TableFrame
 
     tcfg = config["depth"]["tables"][table_id]
     by_label = {r.label: r for r in expand_rows(table_id, config["depth"])}
-    row_objs = [by_label[label] for label, _, _ in rows]
-    row_results = [results[run] for _, run, _ in rows]
-    ours, noise, info = reporting.table_frame(row_objs, row_results, time_column=tcfg.get("time_column"),
-                                              with_last_quarter=bool(tcfg.get("last_quarter", False)))
-    return TableFrame(ours, noise, table_note(config, tcfg, info))
+    per_seed: list[list[tuple]] = []  # per_seed[k] = the rows' k-th runs
+    seen: dict[str, int] = {}
+    for label, run, step in rows:
+        k = seen.get(label, 0)
+        seen[label] = k + 1
+        while len(per_seed) <= k:
+            per_seed.append([])
+        per_seed[k].append((label, run))
+    frames, infos = [], []
+    for k, seed_rows in enumerate(per_seed):
+        df, noise, info = reporting.table_frame([by_label[label] for label, _ in seed_rows],
+                                                [results[run] for _, run in seed_rows],
+                                                time_column=tcfg.get("time_column"),
+                                                with_last_quarter=bool(tcfg.get("last_quarter", False)))
+        frames.append((df, noise))
+        infos.append(info)
+    if not frames:
+        return TableFrame(reporting.table_frame([], [])[0], {}, table_note(config, tcfg, {}, 1))
+    ours, noise = frames[0][0].copy(), dict(frames[0][1])
+    for label, n in seen.items():
+        if n < 2:
+            continue
+        values = {c: [f[0].at[label, c] for f in frames if label in f[0].index] for c in ours.columns}
+        for c, vals in values.items():
+            ours.at[label, c] = float(np.mean(vals))
+        noise[label] = {col: noise_lib.seeds(values[col]) for col in METRIC_COLUMNS.values() if col in values}
+    return TableFrame(ours, noise, table_note(config, tcfg, infos[0], max(seen.values())))
 
 
-def table_note(config: Mapping, table_cfg: Mapping, info: Mapping) -> str:
+def table_note(config: Mapping, table_cfg: Mapping, info: Mapping, seeds: int = 1) -> str:
     """Caption note: the training recipe, the table's own note, the frames per comparison group, skips."""
     d = config["depth"]
     overrides = sorted({int(m["steps"]) for m in d["models"] if "steps" in m})
@@ -217,12 +261,16 @@ def table_note(config: Mapping, table_cfg: Mapping, info: Mapping) -> str:
     if groups:
         parts.append("frames averaged per comparison group (the same frames for every row of a group): "
                      + ", ".join(f"{g or 'all'} {n}" for g, n in groups.items()))
-    parts.append("one trained model per row: ± is the bootstrap standard error over those frames, no seed spread")
+    if seeds > 1:
+        parts.append(f"rows whose model was trained with {seeds} seeds: mean ± std over the seeds; other rows: ± is "
+                     "the bootstrap standard error over the frames")
+    else:
+        parts.append("one trained model per row: ± is the bootstrap standard error over those frames, no seed spread")
     reasons = info.get("reasons", [])
     if reasons:
         parts.append(f"{len(reasons)} skip reason(s), e.g. '{reasons[0]}' (all in the log)")
     return "; ".join(parts)
 
 
-__all__ = ["METRIC_COLUMNS", "expand_rows", "table_rows", "runs", "rows", "result_path", "table_frame",
-           "model_parent", "model_tables", "eval_files", "spec_of"]
+__all__ = ["METRIC_COLUMNS", "expand_rows", "table_rows", "with_seeds", "runs", "rows", "result_path",
+           "table_frame", "model_parent", "model_tables", "models", "eval_files", "spec_of"]
