@@ -11,8 +11,8 @@ rule adapt_scene:
     wildcard_constraints:
         dataset=_names_regex(ADAPTER_DATASETS),
     log:
-        "results/logs/adapt_scene/{dataset}/{scene}.log",
-        run="results/runs/adapt_scene/{dataset}/{scene}.json",
+        "results/logs/raw/{dataset}/{scene}.log",
+        run="results/runs/raw/{dataset}/{scene}.json",
     threads: 1
     resources:
         mem_mb=2000,
@@ -30,8 +30,8 @@ rule adapt_clips:
     wildcard_constraints:
         split=_names_regex(SOURCE_CLIP_SPLITS),
     log:
-        "results/logs/adapt_clips/{split}.log",
-        run="results/runs/adapt_clips/{split}.json",
+        "results/logs/raw/clips/{split}.log",
+        run="results/runs/raw/clips/{split}.json",
     threads: 1
     resources:
         mem_mb=1000,

@@ -8,8 +8,8 @@ rule detect_instances:
     output:
         "results/prepared/{dataset}/{scene}/detections_{level}.npz",
     log:
-        "results/logs/detect_instances/{dataset}/{scene}/{level}.log",
-        run="results/runs/detect_instances/{dataset}/{scene}/{level}.json",
+        "results/logs/prepared/{dataset}/{scene}/detections_{level}.log",
+        run="results/runs/prepared/{dataset}/{scene}/detections_{level}.json",
     threads: 1
     resources:
         mem_mb=2000,
@@ -26,8 +26,8 @@ rule segment_road:
     output:
         "results/prepared/{dataset}/{scene}/road.npz",
     log:
-        "results/logs/segment_road/{dataset}/{scene}.log",
-        run="results/runs/segment_road/{dataset}/{scene}.json",
+        "results/logs/prepared/{dataset}/{scene}/road.log",
+        run="results/runs/prepared/{dataset}/{scene}/road.json",
     threads: 1
     resources:
         mem_mb=2000,
@@ -45,8 +45,8 @@ rule tracks3d:
     output:
         "results/prepared/{dataset}/{scene}/tracks3d_{level}.csv",
     log:
-        "results/logs/tracks3d/{dataset}/{scene}/{level}.log",
-        run="results/runs/tracks3d/{dataset}/{scene}/{level}.json",
+        "results/logs/prepared/{dataset}/{scene}/tracks3d_{level}.log",
+        run="results/runs/prepared/{dataset}/{scene}/tracks3d_{level}.json",
     threads: 1
     resources:
         mem_mb=1000,
@@ -63,8 +63,8 @@ rule medianflow:
     output:
         "results/prepared/clips/{split}/medianflow.npz",
     log:
-        "results/logs/medianflow/{split}.log",
-        run="results/runs/medianflow/{split}.json",
+        "results/logs/prepared/clips/{split}/medianflow.log",
+        run="results/runs/prepared/clips/{split}/medianflow.json",
     threads: 1
     resources:
         mem_mb=2000,

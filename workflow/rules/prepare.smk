@@ -7,8 +7,8 @@ rule prepare_camera:
     output:
         "results/prepared/{dataset}/{scene}/{camera}.npz",
     log:
-        "results/logs/prepare_camera/{dataset}/{scene}/{camera}.log",
-        run="results/runs/prepare_camera/{dataset}/{scene}/{camera}.json",
+        "results/logs/prepared/{dataset}/{scene}/{camera}.log",
+        run="results/runs/prepared/{dataset}/{scene}/{camera}.json",
     threads: 1
     resources:
         mem_mb=2000,
@@ -25,8 +25,8 @@ rule lidar_depth:
     output:
         "results/prepared/{dataset}/{scene}/{camera}_depth.npz",
     log:
-        "results/logs/lidar_depth/{dataset}/{scene}/{camera}.log",
-        run="results/runs/lidar_depth/{dataset}/{scene}/{camera}.json",
+        "results/logs/prepared/{dataset}/{scene}/{camera}_depth.log",
+        run="results/runs/prepared/{dataset}/{scene}/{camera}_depth.json",
     threads: 1
     resources:
         mem_mb=2000,

@@ -9,8 +9,8 @@ rule world_scene:
     wildcard_constraints:
         dataset=_names_regex(WORLD_DATASETS),  # real datasets: adapt_scene (adapters.smk)
     log:
-        "results/logs/world_scene/{dataset}/{scene}.log",
-        run="results/runs/world_scene/{dataset}/{scene}.json",
+        "results/logs/raw/{dataset}/{scene}.log",
+        run="results/runs/raw/{dataset}/{scene}.json",
     threads: 1
     resources:
         mem_mb=3000,
@@ -28,8 +28,8 @@ rule world_clips:
     wildcard_constraints:
         split=_names_regex(WORLD_CLIP_SPLITS),  # splits of velocity_clips.source: adapt_clips (adapters.smk)
     log:
-        "results/logs/world_clips/{split}.log",
-        run="results/runs/world_clips/{split}.json",
+        "results/logs/raw/clips/{split}.log",
+        run="results/runs/raw/clips/{split}.json",
     threads: 1
     resources:
         mem_mb=3000,
