@@ -7,18 +7,14 @@ from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
 
-TABLE = "data_summary"
-
-
 def runs(config: Mapping, scenes_of) -> dict[str, dict]:
     return {"summary": {"datasets": list(config["datasets"])}}
 
 
 def rows(config: Mapping, scenes_of) -> dict[str, list[tuple[str, str, None]]]:
-    """One row per dataset, all from the one summary run (configured by ``prepare.tables.data_summary``)."""
-    if TABLE not in config["prepare"].get("tables", {}):
-        return {}
-    return {TABLE: [(d, "summary", None) for d in config["datasets"] if scenes_of(d)]}
+    """Each table of ``prepare.tables``: one row per dataset with scenes, all from the one summary run."""
+    datasets = [d for d in config["datasets"] if scenes_of(d)]
+    return {t: [(d, "summary", None) for d in datasets] for t in config["prepare"].get("tables", {})}
 
 
 def result_path(run: str) -> str:
