@@ -370,50 +370,87 @@ def test_build_split_counts_bad_input_and_train_stays_finite(tmp_path, tmpl):
 
 
 # ------------------------------------------------------------------------------------------- tables
+def _ld_config():
+    ld = {"dataset": "world_kitti", "level": "cityscapes", "seeds": [0, 1], "eval": {"recall": "R40", "iou": [0.7, 0.5]},
+          "runs": {"a": {}, "b": {}},
+          "tables": {"mccraith_ch7_table1": {"moderate_label": "Moderate", "lifting_row": "McCraith et al. [2022] †",
+                                             "rows": {"ours†": "a", "CenterPoint † Yin et al. [2021]": "b"}},
+                     "mccraith_ch7_table3": {"moderate_label": "Medium", "rows": {"0": "a", "2": "a"}}}}
+    return {"seed": 10, "profile": "tiny", "lidar_detector": ld,
+            "lifting": {"seeds": [0, 1, 2], "full_method": "full", "runs": {"full": {}}}}
+
+
+def _metrics(e, m, h):
+    out = {}
+    for d, v in zip(("easy", "moderate", "hard"), (e, m, h)):
+        out |= {f"Car_bev_0.7/{d}_R40": v, f"Car_bev_0.7/{d}_R11": v + 1, f"Car_bev_0.5/{d}_R40": v + 10}
+    return out | {"n_gt/easy": 30, "n_gt/moderate": 80, "n_gt/hard": 100, "frames": 90}
+
+
 def test_tables_from_hand_made_metrics(tmp_path):
-    from redsup.lidar_detector.tables import CH6_ROW, build_table, caption_note
+    from redsup.lidar_detector.tables import build_table, caption_note
     from redsup.tables import write_table
 
-    def metrics(e, m, h):
-        out = {}
-        for d, v in zip(("easy", "moderate", "hard"), (e, m, h)):
-            out |= {f"Car_bev_0.7/{d}_R40": v, f"Car_bev_0.7/{d}_R11": v + 1, f"Car_bev_0.5/{d}_R40": v + 10}
-        return out | {"n_gt/easy": 30, "n_gt/moderate": 80, "n_gt/hard": 100, "frames": 90}
-
+    ch6 = "McCraith et al. [2022] †"
     lifting = {"Car_bev_0.7/easy_R40": 40.0, "Car_bev_0.7/moderate_R40": 30.0, "Car_bev_0.7/hard_R40": 25.0}
-    t1 = build_table("mccraith_ch7_table1", {CH6_ROW: lifting, "ours†": metrics(60, 50, 45),
-                                             "CenterPoint † Yin et al. [2021]": metrics(80, 70, 65),
-                                             "CenterPoint Yin et al. [2021]": metrics(85, 75, 70)})
+    t1, noise = build_table("Moderate", {ch6: [lifting], "ours†": [_metrics(60, 50, 45), _metrics(62, 52, 47)],
+                                         "CenterPoint † Yin et al. [2021]": [_metrics(80, 70, 65)],
+                                         "CenterPoint Yin et al. [2021]": [_metrics(85, 75, 70)]})
     assert list(t1.columns[:3]) == ["AP_BEV Easy", "AP_BEV Moderate", "AP_BEV Hard"]
-    assert t1.loc["ours†", "AP_BEV Moderate R11"] == 51 and t1.loc["ours†", "AP_BEV@0.5 Hard"] == 55
-    assert math.isnan(t1.loc[CH6_ROW, "AP_BEV@0.5 Easy"])
+    # by hand: the mean of the two seeds (51 + 1 on R11, 46 + 10 at IoU 0.5), the record keeps both values
+    assert t1.loc["ours†", "AP_BEV Moderate R11"] == 52 and t1.loc["ours†", "AP_BEV@0.5 Hard"] == 56
+    assert noise["ours†"]["AP_BEV Moderate"] == {"kind": "seeds", "values": [50.0, 52.0]}
+    assert math.isnan(t1.loc[ch6, "AP_BEV@0.5 Easy"])
     out = {k: tmp_path / f"t1.{k}" for k in ("md", "csv", "tex")}
-    note = caption_note("default", metrics(0, 0, 0), "R40", 3)
-    assert "fewer than 41 valid cars for easy" in note
-    score = write_table("mccraith_ch7_table1", t1, out["md"], out["csv"], out["tex"], note=note)
-    claims = {c["text"][:30]: c["holds"] for c in score["claims"]}
-    assert claims["Ours performs significantly be"] is True          # 50 > 30 on Moderate
+    note = caption_note("default", _metrics(0, 0, 0), "R40", 3, 2)
+    assert "fewer than 41 valid cars for easy" in note and "over 2 training seeds" in note
+    score = write_table("mccraith_ch7_table1", t1, out["md"], out["csv"], out["tex"], note=note, noise=noise)
     assert score["rows_both"] == 4 and (tmp_path / "mccraith_ch7_table1.score.json").exists()
-    t2 = build_table("mccraith_ch7_table2", {"||p - p'||^2": metrics(40, 30, 20), "SIC_{5,0}": metrics(50, 40, 30)})
-    assert "AP_BEV Medium" in t2.columns
-    score2 = write_table("mccraith_ch7_table2", t2, *(tmp_path / f"t2.{k}" for k in ("md", "csv", "tex")))
-    assert score2["claims"][0]["holds"] is True
+    t2, _ = build_table("Medium", {"||p - p'||^2": [_metrics(40, 30, 20)], "SIC_{5,0}": [_metrics(50, 40, 30)]})
+    assert "AP_BEV Medium" in t2.columns and "AP_BEV Moderate" not in t2.columns
 
 
-def test_dag_helpers_share_configurations_and_check_rows():
-    from redsup.lidar_detector import dag
+def test_plan_rows_read_the_lifting_full_method_and_share_runs():
+    from redsup.lidar_detector import plan
 
+    config = _ld_config()
     scenes = ["train_000", "train_001", "test_000", "long_000"]
-    assert dag.split_scenes(scenes, "train") == ["train_000", "train_001", "long_000"]
-    assert dag.split_scenes(scenes, "test") == ["test_000"]
-    ld = {"dataset": "world_kitti", "level": "cityscapes", "runs": {"a": {}, "b": {}},
-          "tables": {"mccraith_ch7_table1": {"ours†": "a", "x": "b"}, "mccraith_ch7_table3": {"0": "a", "2": "a"}}}
-    inputs = dag.split_inputs(ld, scenes, "test")
-    assert inputs == {"scenes": ["results/raw/world_kitti/test_000"],
-                      "detections": ["results/prepared/world_kitti/test_000/detections_cityscapes.npz"]}
-    assert dag.table_inputs(ld, "mccraith_ch7_table3", "l.json") == {"metrics": ["results/lidar_detector/metrics/a.json"]}
-    assert dag.table_inputs(ld, "mccraith_ch7_table1", "l.json")["lifting"] == "l.json"
-    dag.check_tables(ld)
-    ld["tables"]["mccraith_ch7_table3"]["1"] = "c"
+    assert plan.split_scenes(scenes, "train") == ["train_000", "train_001", "long_000"]
+    assert plan.split_scenes(scenes, "test") == ["test_000"]
+    assert plan.split_inputs(config["lidar_detector"], scenes, "test") == {
+        "scenes": ["results/raw/world_kitti/test_000"],
+        "detections": ["results/prepared/world_kitti/test_000/detections_cityscapes.npz"]}
+    assert sorted(plan.runs(config)) == ["a/seed0", "a/seed1", "b/seed0", "b/seed1"]
+    assert plan.runs(config)["b/seed1"]["training_seed"] == 11
+    rows = plan.rows(config)
+    # Table 1's ch. 6 row: every seed of lifting.full_method, first; then this stage's rows per seed
+    assert rows["mccraith_ch7_table1"][:4] == [("McCraith et al. [2022] †", f"lifting:full/seed{k}", None)
+                                               for k in range(3)] + [("ours†", "a/seed0", None)]
+    assert plan.result_path("lifting:full/seed2") == "results/lifting/metrics/full/seed2.json"
+    assert plan.result_path("a/seed1") == "results/lidar_detector/metrics/a/seed1.json"
+    assert rows["mccraith_ch7_table3"] == [("0", "a/seed0", None), ("0", "a/seed1", None),
+                                           ("2", "a/seed0", None), ("2", "a/seed1", None)]
+    assert plan.tables_of(config, "a/seed1") == ["mccraith_ch7_table1", "mccraith_ch7_table3"]   # shared run
+    config["lifting"]["full_method"] = "other"
+    with pytest.raises(ValueError, match="full_method"):
+        plan.rows(config)
+    config = _ld_config()
+    config["lidar_detector"]["tables"]["mccraith_ch7_table3"]["rows"]["1"] = "c"
     with pytest.raises(ValueError, match="unknown configurations"):
-        dag.check_tables(ld)
+        plan.check_tables(config["lidar_detector"])
+
+
+def test_table_frame_means_and_seed_records():
+    from redsup.lidar_detector import plan
+
+    config = _ld_config()
+    rows = plan.rows(config)["mccraith_ch7_table1"]
+    results = {run: _metrics(10 * i, 10 * i, 10 * i) for i, (_, run, _) in enumerate(rows)}
+    frame = plan.table_frame("mccraith_ch7_table1", config, rows, results)
+    assert list(frame.ours.index) == ["McCraith et al. [2022] †", "ours†", "CenterPoint † Yin et al. [2021]"]
+    assert frame.ours.loc["McCraith et al. [2022] †", "AP_BEV Moderate"] == 10     # (0 + 10 + 20) / 3
+    assert frame.noise["ours†"]["AP_BEV Hard"]["values"] == [30.0, 40.0]
+    assert "lifting.full_method = full, 3 seeds" in frame.note
+    frame3 = plan.table_frame("mccraith_ch7_table3", config, plan.rows(config)["mccraith_ch7_table3"],
+                              {"a/seed0": _metrics(1, 2, 3), "a/seed1": _metrics(3, 4, 5)})
+    assert frame3.ours.loc["2", "AP_BEV Medium"] == 3 and "lifting" not in frame3.note

@@ -33,19 +33,25 @@ def test_splits_are_cached_with_counts(built):
         assert "skipped with no LiDAR point" in log
 
 
-def test_every_configuration_trained_once_with_curves(built, cfg):
+def test_every_configuration_trained_once_per_seed_with_curves(built, cfg):
+    from redsup import checkpoint
+
+    assert len(cfg["seeds"]) == 2                                   # tiny: two seeds per configuration
     for name in cfg["runs"]:
-        metrics = json.loads((built / f"results/lidar_detector/metrics/{name}.json").read_text())
-        assert metrics["train_steps"] == cfg["train"]["steps"] and metrics["train_steps_nonfinite"] == 0
-        for d in ("easy", "moderate", "hard"):
-            assert 0.0 <= metrics[f"Car_bev_0.7/{d}_R40"] <= 100.0 or math.isnan(metrics[f"Car_bev_0.7/{d}_R40"])
-        assert metrics["frames"] > 0 and metrics["infer_fps"] > 0
-        assert (built / f"results/lidar_detector/models/{name}.pt").stat().st_size > 0
-        record = json.loads((built / f"results/runs/lidar_detector_train/{name}.json").read_text())
-        assert record["status"] == "FINISHED" and record["parent"] in TABLES
-        curves = {m[0] for m in record["metrics"] if m[2] > 0}
-        assert {"train/loss", "train/heatmap", "train/yaw"} <= curves
-        assert any(a[0].endswith("curves.png") for a in record["artifacts"])
+        for k in cfg["seeds"]:
+            metrics = json.loads((built / f"results/lidar_detector/metrics/{name}/seed{k}.json").read_text())
+            assert metrics["train_steps"] == cfg["train"]["steps"] and metrics["train_steps_nonfinite"] == 0
+            for d in ("easy", "moderate", "hard"):
+                v = metrics[f"Car_bev_0.7/{d}_R40"]
+                assert 0.0 <= v <= 100.0 or math.isnan(v)
+            assert metrics["frames"] > 0 and metrics["infer_fps"] > 0
+            ckpt = checkpoint.load(built / f"results/lidar_detector/models/{name}/seed{k}.pt", "lidar_detector")
+            assert ckpt["config"]["profile"] == "tiny" and ckpt["meta"]["configuration"] == name
+            record = json.loads((built / f"results/runs/lidar_detector/metrics/{name}/seed{k}.json").read_text())
+            assert record["status"] == "FINISHED" and record["parent"] in TABLES
+            curves = {m[0] for m in record["metrics"] if m[2] > 0}
+            assert {"train/loss", "train/heatmap", "train/yaw"} <= curves
+            assert any(a[0].endswith("curves.png") for a in record["artifacts"])
 
 
 def test_tables_have_paper_values_and_scores(built, cfg):
@@ -54,9 +60,9 @@ def test_tables_have_paper_values_and_scores(built, cfg):
         assert "(paper)" in md and "(ours)" in md and "Scorecard" in md
         csv = pd.read_csv(built / f"results/tables/{table_id}.csv", dtype=str)
         rows = set(csv.iloc[:, 0])
-        assert set(cfg["tables"][table_id]) <= rows
+        assert set(cfg["tables"][table_id]["rows"]) <= rows
         score = json.loads((built / f"results/tables/{table_id}.score.json").read_text())
-        assert score["rows_both"] >= len(cfg["tables"][table_id]) and score["claims_total"] >= 2
+        assert score["rows_both"] >= len(cfg["tables"][table_id]["rows"]) and score["claims_total"] >= 2
         assert (built / f"results/tables/{table_id}.tex").exists()
     t1 = pd.read_csv(built / "results/tables/mccraith_ch7_table1.csv").set_index("row")
     assert t1.loc["McCraith et al. [2022] †", "status"] == "ours + paper"      # the ch. 6 stage's numbers

@@ -16,7 +16,7 @@ from redsup.lifting.criterion import (AlignmentAtBestBin, AlignmentOverHypothese
                                       OutlierAwarePointLoss, SquaredPointLoss, build_criterion)
 from redsup.lifting.model import BinYawHead, LiftingNet
 from redsup.lifting.postprocess import frame_detections, predict_boxes
-from redsup.lifting.tables import build_table, gt_count_note, parent_table, table_columns
+from redsup.lifting.tables import gt_count_note, seed_table, table_columns
 
 K = 64
 LOSS_CFG = {"hypothesis_temperature": 0.1, "supervised_beta": 0.1, "weights": {}}
@@ -342,46 +342,92 @@ def test_kitti_pixel_scale():
     assert np.allclose(g.bbox, [[10, 20, 30, 40]])                  # inputs untouched
 
 
-def test_tables_from_metrics():
-    m = {f"Car_{k}_0.5/{d}_{r}": v for k, base in (("bev", 10), ("3d", 20)) for d, v0 in
-         zip(("easy", "moderate", "hard"), (1, 2, 3)) for r, v in (("R40", base + v0), ("R11", base + v0 + 0.5))}
+def _metrics(base_bev=10, base_3d=20):
+    return {f"Car_{k}_0.5/{d}_{r}": v for k, base in (("bev", base_bev), ("3d", base_3d)) for d, v0 in
+            zip(("easy", "moderate", "hard"), (1, 2, 3)) for r, v in (("R40", base + v0), ("R11", base + v0 + 0.5))}
+
+
+def test_tables_from_metrics_average_the_seeds():
+    m = _metrics()
     cols = table_columns(m)
     assert cols["AP_BEV Moderate"] == 12 and cols["AP_3D Hard"] == 23 and cols["AP_BEV Easy (R11)"] == 11.5
-    df = build_table({"(a) x": "r1", "(b) y": "r2"}, {"r1": m, "r2": m})
+    results = {"r1/seed0": m, "r1/seed1": _metrics(14, 20), "r2/seed0": m, "r2/seed1": m}
+    rows = [("(a) x", "r1/seed0", None), ("(a) x", "r1/seed1", None), ("(b) y", "r2/seed0", None),
+            ("(b) y", "r2/seed1", None)]
+    df, noise = seed_table(rows, results)
     assert list(df.index) == ["(a) x", "(b) y"] and df.loc["(b) y", "AP_3D Easy"] == 21
+    # by hand: BEV moderate 12 and 16 over the two seeds -> mean 14, the record keeps both values
+    assert df.loc["(a) x", "AP_BEV Moderate"] == 14
+    assert noise["(a) x"]["AP_BEV Moderate"] == {"kind": "seeds", "values": [12.0, 16.0]}
+    assert noise["(b) y"]["AP_3D Easy"]["values"] == [21.0, 21.0]
     with pytest.raises(KeyError, match="r3"):
-        build_table({"(c)": "r3"}, {"r1": m})
-    tables = {"t1": {"a": "r1"}, "t2": {"b": "r2", "c": "r1"}}
-    assert parent_table(tables, "r2") == "t2" and parent_table(tables, "r1") == "t1"
+        seed_table([("(c)", "r3/seed0", None)], {"r1/seed0": m})
     assert "fewer than 41 in easy" in gt_count_note({"r": {"n_gt/easy": 9, "n_gt/moderate": 50, "n_gt/hard": 90}})
 
 
-def test_plan_inputs_and_row_summary():
+def _plan_config():
+    spec = {"points": "mask", "level": "coco", "point_loss": "outlier_aware", "terms": ["alignment", "multiview"],
+            "yaw": {"kind": "bins", "n_bins": 64}, "targets": "none"}
+    lift = {"dataset": "w", "train_splits": ["train", "long"], "test_split": "test", "seeds": [0, 1, 2],
+            "eval": {"table_iou": 0.5},
+            "runs": {"a": spec,
+                     "b": {"points": "mask", "level": "cityscapes", "point_loss": "squared", "terms": ["supervised_box"],
+                           "yaw": {"kind": "bins", "n_bins": 64}, "targets": "labels", "labels_from": "a"}},
+            "tables": {"t1": {"rows": {"(x)": "a", "(y)": "b"}, "note": "N1"}, "t2": {"rows": {"(z)": "a"}}},
+            "full_method": "a"}
+    return {"seed": 100, "profile": "tiny", "lifting": lift}
+
+
+def test_plan_runs_rows_and_inputs_per_seed():
     from redsup.lifting import plan
     from redsup.lifting.tables import row_summary
 
-    cfg = {"dataset": "w", "train_splits": ["train", "long"], "test_split": "test",
-           "runs": {"a": {"points": "mask", "level": "coco", "point_loss": "outlier_aware",
-                          "terms": ["alignment", "multiview"], "yaw": {"kind": "bins", "n_bins": 64},
-                          "targets": "none"},
-                    "b": {"points": "mask", "level": "cityscapes", "point_loss": "squared", "terms": ["supervised_box"],
-                          "yaw": {"kind": "bins", "n_bins": 64}, "targets": "labels", "labels_from": "a"}},
-           "tables": {"t": {"(x)": "a", "(y)": "b", "(z)": "a"}}}
+    config = _plan_config()
+    cfg = config["lifting"]
+    assert sorted(plan.runs(config)) == ["a/seed0", "a/seed1", "a/seed2", "b/seed0", "b/seed1", "b/seed2"]
+    assert plan.runs(config)["b/seed2"]["training_seed"] == 102
+    rows = plan.rows(config)
+    assert rows["t1"] == [("(x)", "a/seed0", None), ("(x)", "a/seed1", None), ("(x)", "a/seed2", None),
+                          ("(y)", "b/seed0", None), ("(y)", "b/seed1", None), ("(y)", "b/seed2", None)]
+    # a run shared by two tables is listed in both tables' rows (and both are its tables)
+    assert ("(z)", "a/seed1", None) in rows["t2"] and plan.tables_of(config, "a/seed1") == ["t1", "t2"]
+    assert plan.tables_of(config, "b/seed0") == ["t1"] and plan.tables_of_labels(config, "a/seed0") == ["t1"]
+    assert plan.result_path("b/seed2") == "results/lifting/metrics/b/seed2.json"
+    assert plan.parse_run("bins16_coco/seed10") == ("bins16_coco", 10)
+    with pytest.raises(ValueError, match="seed"):
+        plan.parse_run("a")
+    assert plan.full_method_runs(config) == ["a/seed0", "a/seed1", "a/seed2"]
     scenes = ["train_000", "train_001", "test_000", "long_000"]
-    inp = plan.run_inputs(cfg, scenes, "b")
+    inp = plan.run_inputs(cfg, scenes, "b", 1)
     assert inp["train_scenes"] == ["results/raw/w/train_000", "results/raw/w/train_001", "results/raw/w/long_000"]
     assert inp["test_detections"] == ["results/prepared/w/test_000/detections_cityscapes.npz"]
-    assert "test_tracks" not in inp and inp["labels"] == "results/lifting/labels/a.npz"
-    assert "labels" not in plan.run_inputs(cfg, scenes, "a")
-    assert plan.labels_inputs(cfg, scenes, "a")["model"] == "results/lifting/models/a.pt"
-    assert plan.table_inputs(cfg, "t")["metrics"] == ["results/lifting/metrics/a.json",
-                                                      "results/lifting/metrics/b.json"]
+    assert "test_tracks" not in inp and inp["labels"] == "results/lifting/labels/a/seed1.npz"   # same seed's labels
+    assert "labels" not in plan.run_inputs(cfg, scenes, "a", 0)
+    assert plan.labels_inputs(cfg, scenes, "a", 2)["model"] == "results/lifting/models/a/seed2.pt"
     bad = {**cfg, "runs": {**cfg["runs"], "b": {**cfg["runs"]["b"], "labels_from": "nope"}}}
     with pytest.raises(ValueError, match="labels_from"):
-        plan.run_inputs(bad, scenes, "b")
-    text = row_summary(cfg["tables"]["t"], cfg["runs"])
+        plan.run_inputs(bad, scenes, "b", 0)
+    with pytest.raises(ValueError, match="unknown configurations"):
+        plan.rows({**config, "lifting": {**cfg, "tables": {"t": {"rows": {"(q)": "nope"}}}}})
+    text = row_summary(cfg["tables"]["t1"]["rows"], cfg["runs"])
     assert "(x) = a (mask points, coco detector, outlier_aware, alignment+multiview, 64 bins)" in text
     assert "(y) = b (mask points, cityscapes detector, supervised by labels, 64 bins)" in text
+
+
+def test_table_frame_from_config_section():
+    from redsup.lifting import plan
+
+    config = _plan_config()
+    rows = plan.rows(config)["t1"]
+    results = {run: _metrics(10 + i) | {"diag/bev_centre_within_1m": 0.5, "diag/yaw_within_20deg_mod_pi": 0.25}
+               for i, (_, run, _) in enumerate(rows)}
+    frame = plan.table_frame("t1", config, rows, results)
+    # (x) = a/seed0..2 with BEV bases 10, 11, 12 -> moderate 12, 13, 14: mean 13
+    assert frame.ours.loc["(x)", "AP_BEV Moderate"] == 13
+    assert frame.noise["(x)"]["AP_BEV Moderate"]["values"] == [12.0, 13.0, 14.0]
+    assert frame.ours.loc["(y)", "centre < 1 m (%)"] == 50 and frame.ours.loc["(y)", "yaw < 20° (%)"] == 25
+    assert frame.ours.loc["(y)", "AP_BEV Easy"] == 15                       # bases 13, 14, 15 (+1 for easy)
+    assert "N1" in frame.note and "3 training seeds (100, 101, 102)" in frame.note
 
 
 def test_adam_matches_torch_and_step_decay(tmpl):
@@ -405,12 +451,26 @@ def test_adam_matches_torch_and_step_decay(tmpl):
     assert torch.allclose(p.grad, torch.tensor([0.6, 0.8]), atol=1e-5)
 
 
-def test_table_diagnostic_columns():
-    m = {f"Car_bev_0.5/{d}_R40": 1.0 for d in ("easy", "moderate", "hard")}
-    df = build_table({"(a)": "r"}, {"r": m}, info_by_run={"r": {"diag/bev_centre_within_1m": 0.5,
-                                                               "diag/yaw_within_20deg_mod_pi": 0.25}})
-    assert df.loc["(a)", "centre < 1 m (%)"] == 50 and df.loc["(a)", "yaw < 20° (%)"] == 25
-    assert np.isnan(df.loc["(a)", "AP_3D Easy"])
+def test_checkpoint_round_trip_keeps_the_resolved_config(tmp_path):
+    from redsup import checkpoint
+    from redsup.lifting.model import build_model
+    from redsup.lifting.pipeline import load_model, save_model
+
+    yaw = {"kind": "bins", "n_bins": 8}
+    network = {"point_mlp": [8], "head_mlp": [8], "variance_mlp": [8], "sigma_min": 0.05, "sigma_max": 3.0,
+               "position_input": False}
+    torch.manual_seed(0)
+    model = build_model(network, yaw)
+    config = {"seed": 7, "lifting": {"network": network}}
+    path = tmp_path / "m.pt"
+    save_model(model, {"yaw": yaw}, config, path, {"configuration": "x", "seed": 7})
+    ckpt = checkpoint.load(path, "lifting")
+    assert ckpt["config"] == config and ckpt["meta"]["configuration"] == "x" and ckpt["meta"]["yaw"] == yaw
+    again = load_model(path)
+    for (k, v), (k2, v2) in zip(model.state_dict().items(), again.state_dict().items()):
+        assert k == k2 and torch.equal(v, v2)
+    with pytest.raises(ValueError, match="expected 'lidar_detector'"):
+        checkpoint.load(path, "lidar_detector")
 
 
 def test_network_with_position_input():

@@ -14,7 +14,11 @@ TABLES = ("mccraith_ch6_table1", "mccraith_ch6_table2", "mccraith_ch6_table3", "
 
 
 def _lifting_cfg():
-    return yaml.safe_load((ROOT / "config.yaml").read_text())["lifting"]
+    from redsup.config import resolve
+
+    raw = yaml.safe_load((ROOT / "config.yaml").read_text())
+    raw["profile"] = "tiny"
+    return resolve(raw)["lifting"]
 
 
 def test_tables_written_with_paper_values_and_scorecard(built):
@@ -24,7 +28,8 @@ def test_tables_written_with_paper_values_and_scorecard(built):
         for ext in ("csv", "tex", "score.json"):
             assert (built / "results" / "tables" / f"{table}.{ext}").stat().st_size > 0
         score = json.loads((built / "results" / "tables" / f"{table}.score.json").read_text())
-        assert score["rows_both"] == len(_lifting_cfg()["tables"][table])   # every row of ours named as the paper's
+        assert score["rows_both"] == len(_lifting_cfg()["tables"][table]["rows"])   # every row named as the paper's
+        assert "training seeds" in md
     scorecard = (built / "results" / "tables" / "scorecard.md").read_text()
     assert all(t in scorecard for t in TABLES)
     t2 = (built / "results" / "tables" / "mccraith_ch6_table2.md").read_text()
@@ -33,20 +38,30 @@ def test_tables_written_with_paper_values_and_scorecard(built):
     assert "paper only: literature, not reproduced" in t3      # VS3D / Zakharov rows
 
 
-def test_every_configuration_has_metrics_and_a_model(built):
-    for run in _lifting_cfg()["runs"]:
-        metrics = json.loads((built / "results" / "lifting" / "metrics" / f"{run}.json").read_text())
-        assert "Car_bev_0.5/moderate_R40" in metrics and "Car_3d_0.5/hard_R11" in metrics
-        assert (built / "results" / "lifting" / "models" / f"{run}.pt").stat().st_size > 1000
-        record = json.loads((built / "results" / "runs" / "lifting_run" / f"{run}.json").read_text())
-        assert record["status"] == "FINISHED" and record["parent"].startswith("mccraith_ch6_table")
-        steps = [m for m in record["metrics"] if m[0] == "train/total"]
-        assert steps and all(np.isfinite(m[1]) for m in steps)            # a training curve, never NaN
+def test_every_configuration_has_metrics_and_a_model_per_seed(built):
+    from redsup import checkpoint
+
+    cfg = _lifting_cfg()
+    assert len(cfg["seeds"]) == 2                                   # tiny: two seeds per configuration
+    for run in cfg["runs"]:
+        for k in cfg["seeds"]:
+            metrics = json.loads((built / "results" / "lifting" / "metrics" / run / f"seed{k}.json").read_text())
+            assert "Car_bev_0.5/moderate_R40" in metrics and "Car_3d_0.5/hard_R11" in metrics
+            ckpt = checkpoint.load(built / "results" / "lifting" / "models" / run / f"seed{k}.pt", "lifting")
+            assert ckpt["config"]["profile"] == "tiny" and ckpt["meta"]["configuration"] == run
+            record = json.loads((built / "results" / "runs" / "lifting" / "metrics" / run / f"seed{k}.json").read_text())
+            assert record["status"] == "FINISHED" and record["parent"].startswith("mccraith_ch6_table")
+            steps = [m for m in record["metrics"] if m[0] == "train/total"]
+            assert steps and all(np.isfinite(m[1]) for m in steps)            # a training curve, never NaN
+    # a run that feeds several tables is listed by all of them
+    record = json.loads((built / "results/runs/lifting/metrics/full_coco/seed0.json").read_text())
+    assert set(json.loads(record["params"]["tables"]) if isinstance(record["params"]["tables"], str)
+               else record["params"]["tables"]) >= {"mccraith_ch6_table1", "mccraith_ch6_table2", "mccraith_ch6_table3"}
 
 
 def test_full_method_metrics_for_chapter_7(built):
-    path = built / "results" / "lifting" / "metrics" / f"{_lifting_cfg()['full_method']}.json"
-    assert path.name == "full_cityscapes.json"
+    path = built / "results" / "lifting" / "metrics" / _lifting_cfg()["full_method"] / "seed1.json"
+    assert path.parent.name == "full_cityscapes"
     metrics = json.loads(path.read_text())
     for key in ("Car_bev_0.7/moderate_R40", "Car_bev_0.7/easy_R11", "Car_bev_0.5/hard_R40", "Car_3d_0.7/moderate_R40"):
         assert key in metrics
@@ -56,8 +71,8 @@ def test_full_method_metrics_for_chapter_7(built):
 def test_auto_labels_and_bad_input_messages(built):
     cfg = _lifting_cfg()
     source = cfg["runs"]["labels_cityscapes"]["labels_from"]
-    with np.load(built / "results" / "lifting" / "labels" / f"{source}.npz") as z:
+    with np.load(built / "results" / "lifting" / "labels" / source / "seed0.npz") as z:
         assert z["box"].shape[1] == 7 and len(z["box"]) == len(z["detection"]) > 0
         assert np.isfinite(z["box"]).all() and np.allclose(z["box"][:, 3:6], [3.9, 1.6, 1.5])
-    log = (built / "results" / "logs" / "lifting_run" / "full_coco.log").read_text()
+    log = (built / "results" / "logs" / "lifting" / "metrics" / "full_coco" / "seed0.log").read_text()
     assert "objects kept of" in log and "fewer than 3 finite LiDAR points" in log

@@ -1,23 +1,27 @@
 # LiDAR-only detector trained from 2D detections, SIC loss, multi-cell voting (McCraith ch. 7).
-
-import redsup.lidar_detector.dag as ld_dag
+#
+# lidar_detector_split  results/lidar_detector/data/{train,test}.npz   the cached frames of a split
+# lidar_detector_train  results/lidar_detector/{metrics,models,detections}/{conf}/seed{seed}.*   one configuration
+#                       trained with one seed index (a child run) and evaluated on the test split
+# The tables mccraith_ch7_table{1..3} are built by rule table (tables.smk) from redsup.lidar_detector.plan:
+# configurations (`lidar_detector.runs`), seeds and rows (`lidar_detector.tables.<id>`) are data; Table 1's
+# ch. 6 row is read from the lifting stage's runs of `lifting.full_method`.
+import redsup.lidar_detector.plan as ld_plan
 
 LD = config["lidar_detector"]
-LD_RUNS = list(LD["runs"])
-LD_TABLES = list(LD["tables"])
-# the ch. 6 method on the same split (Table 1's "McCraith et al. [2022] †" row): written by the lifting stage
-LD_LIFTING_METRICS = "results/lifting/metrics/full_cityscapes.json"
-ld_dag.check_tables(LD)
+LD_CONFS = list(LD["runs"])
+LD_SEEDS = [str(int(k)) for k in LD["seeds"]]
+ld_plan.check_tables(LD)
 
 
 rule lidar_detector_split:
     input:
-        unpack(lambda wc: ld_dag.split_inputs(LD, scenes_of(LD["dataset"]), wc.split)),
+        unpack(lambda wc: ld_plan.split_inputs(LD, scenes_of(LD["dataset"]), wc.split)),
     output:
         "results/lidar_detector/data/{split}.npz",
     log:
         "results/logs/lidar_detector/data/{split}.log",
-        run="results/runs/lidar_detector_split/{split}.json",
+        run="results/runs/lidar_detector/data/{split}.json",
     wildcard_constraints:
         split="train|test",
     threads: 1
@@ -35,14 +39,15 @@ rule lidar_detector_train:
         train="results/lidar_detector/data/train.npz",
         test="results/lidar_detector/data/test.npz",
     output:
-        metrics="results/lidar_detector/metrics/{run}.json",
-        model="results/lidar_detector/models/{run}.pt",
-        detections="results/lidar_detector/detections/{run}.npz",
+        metrics="results/lidar_detector/metrics/{conf}/seed{seed}.json",
+        model="results/lidar_detector/models/{conf}/seed{seed}.pt",
+        detections="results/lidar_detector/detections/{conf}/seed{seed}.npz",
     log:
-        "results/logs/lidar_detector/train/{run}.log",
-        run="results/runs/lidar_detector_train/{run}.json",
+        "results/logs/lidar_detector/metrics/{conf}/seed{seed}.log",
+        run="results/runs/lidar_detector/metrics/{conf}/seed{seed}.json",
     wildcard_constraints:
-        run="|".join(LD_RUNS),
+        conf="|".join(LD_CONFS),
+        seed="|".join(LD_SEEDS),
     threads: LD["threads"]
     resources:
         mem_mb=4000,
@@ -51,26 +56,3 @@ rule lidar_detector_train:
         ENV
     script:
         "../scripts/lidar_detector_train.py"
-
-
-rule lidar_detector_table:
-    input:
-        unpack(lambda wc: ld_dag.table_inputs(LD, wc.table, LD_LIFTING_METRICS)),
-    output:
-        md="results/tables/{table}.md",
-        csv="results/tables/{table}.csv",
-        tex="results/tables/{table}.tex",
-        score="results/tables/{table}.score.json",
-    log:
-        "results/logs/tables/{table}.log",
-        run="results/runs/tables/{table}.json",
-    wildcard_constraints:
-        table="|".join(LD_TABLES),
-    threads: 1
-    resources:
-        mem_mb=1000,
-        runtime=10,
-    conda:
-        ENV
-    script:
-        "../scripts/lidar_detector_table.py"

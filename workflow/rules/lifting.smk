@@ -1,31 +1,32 @@
 # Lifting 2D masks to 3D boxes with outlier-aware loss and yaw bins (McCraith ch. 6).
 #
-# lifting_run     results/lifting/{metrics,info}/{run}.json + models/{run}.pt   one configuration (a child run):
-#                 train on the train + long scenes, lift and evaluate the test scenes
-# lifting_labels  results/lifting/labels/{run}.npz   a run's boxes on the training detections (Table IV (iii))
-# lifting_table   results/tables/mccraith_ch6_table{1..4}.{md,csv,tex,score.json}
-# The configurations (`lifting.runs`) and the rows of each table (`lifting.tables`) are data; the inputs are
-# computed by redsup.lifting.plan.
+# lifting_run     results/lifting/{metrics,info}/{conf}/seed{seed}.json + models/{conf}/seed{seed}.pt: one
+#                 configuration trained with one seed index (a child run): train on the train + long scenes,
+#                 lift and evaluate the test scenes
+# lifting_labels  results/lifting/labels/{conf}/seed{seed}.npz   a run's boxes on the training detections (Table IV (iii))
+# The tables mccraith_ch6_table{1..4} are built by rule table (tables.smk) from redsup.lifting.plan: the
+# configurations (`lifting.runs`), seeds (`lifting.seeds`) and rows (`lifting.tables.<id>.rows`) are data.
 import redsup.lifting.plan as lift_plan
 
 
 LIFT = config["lifting"]
-LIFT_RUNS = list(LIFT["runs"])
-LIFT_TABLES = list(LIFT["tables"])
+LIFT_CONFS = list(LIFT["runs"])
+LIFT_SEEDS = [str(int(k)) for k in LIFT["seeds"]]
 
 
 rule lifting_run:
     input:
-        unpack(lambda wc: lift_plan.run_inputs(LIFT, scenes_of(LIFT["dataset"]), wc.run)),
+        unpack(lambda wc: lift_plan.run_inputs(LIFT, scenes_of(LIFT["dataset"]), wc.conf, int(wc.seed))),
     output:
-        metrics="results/lifting/metrics/{run}.json",
-        info="results/lifting/info/{run}.json",
-        model="results/lifting/models/{run}.pt",
+        metrics="results/lifting/metrics/{conf}/seed{seed}.json",
+        info="results/lifting/info/{conf}/seed{seed}.json",
+        model="results/lifting/models/{conf}/seed{seed}.pt",
     log:
-        "results/logs/lifting_run/{run}.log",
-        run="results/runs/lifting_run/{run}.json",
+        "results/logs/lifting/metrics/{conf}/seed{seed}.log",
+        run="results/runs/lifting/metrics/{conf}/seed{seed}.json",
     wildcard_constraints:
-        run="|".join(LIFT_RUNS),
+        conf="|".join(LIFT_CONFS),
+        seed="|".join(LIFT_SEEDS),
     threads: LIFT["threads"]
     resources:
         mem_mb=3000,
@@ -38,14 +39,15 @@ rule lifting_run:
 
 rule lifting_labels:
     input:
-        unpack(lambda wc: lift_plan.labels_inputs(LIFT, scenes_of(LIFT["dataset"]), wc.run)),
+        unpack(lambda wc: lift_plan.labels_inputs(LIFT, scenes_of(LIFT["dataset"]), wc.conf, int(wc.seed))),
     output:
-        "results/lifting/labels/{run}.npz",
+        "results/lifting/labels/{conf}/seed{seed}.npz",
     log:
-        "results/logs/lifting_labels/{run}.log",
-        run="results/runs/lifting_labels/{run}.json",
+        "results/logs/lifting/labels/{conf}/seed{seed}.log",
+        run="results/runs/lifting/labels/{conf}/seed{seed}.json",
     wildcard_constraints:
-        run="|".join(LIFT_RUNS),
+        conf="|".join(LIFT_CONFS),
+        seed="|".join(LIFT_SEEDS),
     threads: LIFT["threads"]
     resources:
         mem_mb=2000,
@@ -54,26 +56,3 @@ rule lifting_labels:
         ENV
     script:
         "../scripts/lifting_labels.py"
-
-
-rule lifting_table:
-    input:
-        unpack(lambda wc: lift_plan.table_inputs(LIFT, wc.table)),
-    output:
-        md="results/tables/{table}.md",
-        csv="results/tables/{table}.csv",
-        tex="results/tables/{table}.tex",
-        score="results/tables/{table}.score.json",
-    log:
-        "results/logs/tables/{table}.log",
-        run="results/runs/tables/{table}.json",
-    wildcard_constraints:
-        table="|".join(LIFT_TABLES),
-    threads: 1
-    resources:
-        mem_mb=1000,
-        runtime=10,
-    conda:
-        ENV
-    script:
-        "../scripts/lifting_table.py"

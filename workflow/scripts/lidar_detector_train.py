@@ -1,20 +1,22 @@
-"""Snakemake entry point: train one configuration of the ch. 7 detector and evaluate it on the test split."""
+"""Snakemake entry point: train one configuration of the ch. 7 detector with one seed and evaluate it on the
+test split."""
 import sys
 
 sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821  (log first)
 
 import json  # noqa: E402
-import os  # noqa: E402
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
+from redsup import checkpoint  # noqa: E402
 from redsup.det3d.template import TemplateSpec, build_template  # noqa: E402
 from redsup.fileio import save_npz_atomic, write_text_atomic  # noqa: E402
 from redsup.lidar_detector.augment import AugmentSpec  # noqa: E402
 from redsup.lidar_detector.data import load_split  # noqa: E402
 from redsup.lidar_detector.evaluate import evaluate_split  # noqa: E402
 from redsup.lidar_detector.figures import bev_figure, curves_figure  # noqa: E402
+from redsup.lidar_detector import plan  # noqa: E402
 from redsup.lidar_detector.grid import GridSpec  # noqa: E402
 from redsup.lidar_detector.postprocess import InferSpec  # noqa: E402
 from redsup.lidar_detector.train import RunSpec, TrainSpec, train  # noqa: E402
@@ -23,16 +25,17 @@ from redsup.runlog import child_run  # noqa: E402
 sm = snakemake  # noqa: F821
 torch.set_num_threads(sm.threads)
 cfg = sm.config["lidar_detector"]
-name = sm.wildcards.run
-tables = [t for t, rows in cfg["tables"].items() if name in rows.values()]
+conf, seed_index = sm.wildcards.conf, int(sm.wildcards.seed)
+name = plan.run_id(conf, seed_index)
+seed = plan.training_seed(sm.config, seed_index)
+tables = plan.tables_of(sm.config, name) or list(cfg["tables"])[:1]    # every table whose rows read this run
 device = cfg["device"] if cfg["device"] != "auto" else ("cuda" if torch.cuda.is_available() else "cpu")
-run_spec = RunSpec.from_config(cfg["runs"][name])
+run_spec = RunSpec.from_config(cfg["runs"][conf])
 grid = GridSpec.from_config(cfg["grid"])
 train_spec = TrainSpec.from_config(cfg["train"] | {"min_points": cfg["min_points"], "max_points": cfg["max_points"]})
-with child_run(sm.log.run, tables[0] if tables else "mccraith_ch7_table1", name, rule=sm.rule,
-               wildcards=dict(sm.wildcards), config=sm.config,
-               params={"run": cfg["runs"][name], "tables": tables, "grid": cfg["grid"], "train": cfg["train"],
-                       "augment": cfg["augment"], "network": cfg["network"], "yaw_bins": cfg["yaw_bins"],
+with child_run(sm.log.run, tables[0], name, rule=sm.rule, wildcards=dict(sm.wildcards), config=sm.config,
+               params={"run": cfg["runs"][conf], "tables": tables, "seed": seed, "grid": cfg["grid"],
+                       "train": cfg["train"], "augment": cfg["augment"], "network": cfg["network"], "yaw_bins": cfg["yaw_bins"],
                        "device": device}) as run:
     train_data, test_data = load_split(sm.input.train), load_split(sm.input.test)
     print(f"{name}: {run_spec}; {train_data.n_frames} training frames, {test_data.n_frames} test frames; "
@@ -47,7 +50,7 @@ with child_run(sm.log.run, tables[0] if tables else "mccraith_ch7_table1", name,
         print(f"step {step}: " + ", ".join(f"{k[6:]} {v:.4g}" for k, v in metrics.items()))
 
     model, summary = train(train_data, run_spec, grid, train_spec, AugmentSpec.from_config(cfg["augment"]), template,
-                           n_bins=int(cfg["yaw_bins"]), net=cfg["network"], seed=int(sm.config["seed"]),
+                           n_bins=int(cfg["yaw_bins"]), net=cfg["network"], seed=seed,
                            device=device, log=log)
     metrics, dets = evaluate_split(model, test_data, grid, InferSpec.from_config(cfg["infer"]), template.size,
                                    device=device, iou_thresholds=tuple(cfg["eval"]["iou"]))
@@ -56,10 +59,9 @@ with child_run(sm.log.run, tables[0] if tables else "mccraith_ch7_table1", name,
     run.log_metrics({k: v for k, v in metrics.items() if np.isfinite(v)})
     print(json.dumps(metrics, indent=1))
 
-    tmp = sm.output.model + ".part"
-    torch.save({"state_dict": model.state_dict(), "run": cfg["runs"][name], "grid": cfg["grid"],
-                "network": cfg["network"], "yaw_bins": cfg["yaw_bins"]}, tmp)
-    os.replace(tmp, sm.output.model)
+    checkpoint.save(sm.output.model, "lidar_detector", {"net": model}, sm.config,
+                    {"configuration": conf, "seed": seed, "run": cfg["runs"][conf], "grid": cfg["grid"],
+                     "network": cfg["network"], "yaw_bins": cfg["yaw_bins"], "summary": summary})
     counts = [len(d.score) for d in dets]
     save_npz_atomic(sm.output.detections, frame=np.repeat(np.arange(len(dets)), counts),
                     boxes=np.concatenate([d.boxes for d in dets]) if dets else np.zeros((0, 7)),

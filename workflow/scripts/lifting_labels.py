@@ -1,5 +1,5 @@
 """Snakemake entry point: our automatically generated labels, the lifted boxes of the training detections
-(McCraith ch. 6 Table IV (iii))."""
+(McCraith ch. 6 Table IV (iii)), from one trained run."""
 import sys
 
 sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821  (log first)
@@ -7,19 +7,22 @@ sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821
 import torch  # noqa: E402
 
 from redsup.fileio import save_npz_atomic  # noqa: E402
+from redsup.lifting import plan  # noqa: E402
 from redsup.lifting.pipeline import load_model, make_labels, resolve_device, scene_inputs  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
 
 sm = snakemake  # noqa: F821
 torch.set_num_threads(sm.threads)
 cfg = sm.config["lifting"]
-name = sm.wildcards.run
-spec = cfg["runs"][name]
+conf, seed_index = sm.wildcards.conf, int(sm.wildcards.seed)
+run_name = plan.run_id(conf, seed_index)
+spec = cfg["runs"][conf]
+tables = plan.tables_of_labels(sm.config, run_name) or list(cfg["tables"])[:1]  # tables of the runs it supervises
 scenes = scene_inputs(sm.input.train_scenes, sm.input.train_detections, sm.input.train_tracks)
-with child_run(sm.log.run, "mccraith_ch6_table4", f"labels_{name}", rule=sm.rule, wildcards=dict(sm.wildcards),
-               config=sm.config, params={"run": spec}) as run:
+with child_run(sm.log.run, tables[0], f"labels_{run_name}", rule=sm.rule, wildcards=dict(sm.wildcards),
+               config=sm.config, params={"run": spec, "tables": tables}) as run:
     model = load_model(sm.input.model, resolve_device(cfg["device"]))
-    labels = make_labels(model, spec, cfg, scenes, seed=int(sm.config["seed"]))
+    labels = make_labels(model, spec, cfg, scenes, seed=plan.training_seed(sm.config, seed_index))
     save_npz_atomic(sm.output[0], **labels)
     run.log_metrics({"labels": float(len(labels["box"]))})
     print(f"{len(labels['box'])} labels from {len(scenes)} scenes")

@@ -1,23 +1,25 @@
 """The three tables of ch. 7 from the per-configuration metrics (flat KITTI AP dicts, `evaluate`).
 
 Rows are named as in the thesis (`paper_values.csv`); the configuration behind each row comes from the
-config's `lidar_detector.tables` mapping (row -> configuration name), so identical configurations are
-trained once and shared between tables. Columns: AP_BEV at IoU 0.7 with the primary recall convention
-(named as the thesis' columns, paired with its values), then the other convention ("... R11" / "...
-R40") and IoU 0.5, ours only.
+config's `lidar_detector.tables.<table>.rows` mapping (row -> configuration name), so identical
+configurations are trained once (per seed) and shared between tables; what else differs between tables
+(the moderate column's name, the ch. 6 row) is data in the same section, never a branch on the id. A cell is
+the mean over the seeds, its noise record the per-seed values. Columns: AP_BEV at IoU 0.7 with the primary
+recall convention (named as the thesis' columns, paired with its values), then the other convention ("...
+R11" / "... R40") and IoU 0.5, ours only.
 """
 from __future__ import annotations
 
 import math
 import re
 
+import numpy as np
 import pandas as pd
 
 from redsup.det3d.kitti_eval import DIFFICULTIES
-
-# the thesis' column names per table (Table 1 says "Moderate", Tables 2-3 "Medium")
-MODERATE_NAME = {"mccraith_ch7_table1": "Moderate", "mccraith_ch7_table2": "Medium", "mccraith_ch7_table3": "Medium"}
-CH6_ROW = "McCraith et al. [2022] †"
+from redsup.lidar_detector.plan import LIFTING
+from redsup.tables.contract import TableFrame
+from redsup.tables.noise import seeds as seed_record
 
 
 def metric_name(name: str) -> str:
@@ -29,38 +31,64 @@ def metric_key(difficulty: str, iou: float = 0.7, recall: str = "R40", metric: s
     return f"Car_{metric}_{iou:g}/{difficulty}_{recall}"
 
 
-def _label(table_id: str, difficulty: str) -> str:
-    return MODERATE_NAME[table_id] if difficulty == "moderate" else difficulty.capitalize()
+def _label(moderate: str, difficulty: str) -> str:
+    return moderate if difficulty == "moderate" else difficulty.capitalize()
 
 
-def table_row(table_id: str, metrics: dict, recall: str = "R40", second_iou: float = 0.5) -> dict[str, float]:
-    """One row of our table from a flat metrics dict (missing keys -> NaN)."""
+def table_row(moderate: str, metrics: dict, recall: str = "R40", second_iou: float = 0.5) -> dict[str, float]:
+    """One row of our table from a flat metrics dict (missing keys -> NaN); ``moderate``: the thesis' name of
+    the moderate column ("Moderate" or "Medium")."""
     other = "R11" if recall == "R40" else "R40"
     row: dict[str, float] = {}
     for d in DIFFICULTIES:
-        row[f"AP_BEV {_label(table_id, d)}"] = float(metrics.get(metric_key(d, 0.7, recall), math.nan))
+        row[f"AP_BEV {_label(moderate, d)}"] = float(metrics.get(metric_key(d, 0.7, recall), math.nan))
     for d in DIFFICULTIES:
-        row[f"AP_BEV {_label(table_id, d)} {other}"] = float(metrics.get(metric_key(d, 0.7, other), math.nan))
+        row[f"AP_BEV {_label(moderate, d)} {other}"] = float(metrics.get(metric_key(d, 0.7, other), math.nan))
     for d in DIFFICULTIES:
-        row[f"AP_BEV@{second_iou:g} {_label(table_id, d)}"] = float(metrics.get(metric_key(d, second_iou, recall),
+        row[f"AP_BEV@{second_iou:g} {_label(moderate, d)}"] = float(metrics.get(metric_key(d, second_iou, recall),
                                                                                math.nan))
     return row
 
 
-def build_table(table_id: str, rows: dict[str, dict], recall: str = "R40", second_iou: float = 0.5) -> pd.DataFrame:
-    """DataFrame indexed by the thesis' row labels; `rows` maps row label -> flat metrics dict."""
-    df = pd.DataFrame({r: table_row(table_id, m, recall, second_iou) for r, m in rows.items()}).T
+def build_table(moderate: str, rows: dict[str, list[dict]], recall: str = "R40",
+                second_iou: float = 0.5) -> tuple[pd.DataFrame, dict]:
+    """(ours, noise): ``rows`` maps row label -> the flat metrics dicts of its seeds; a cell is their mean,
+    its noise the seed record of the per-seed values."""
+    lines, noise = {}, {}
+    for label, per_seed in rows.items():
+        cells = [table_row(moderate, m, recall, second_iou) for m in per_seed]
+        lines[label] = {c: float(np.mean([x[c] for x in cells])) for c in cells[0]}
+        noise[label] = {c: seed_record([x[c] for x in cells]) for c in cells[0]}
+    df = pd.DataFrame(lines).T
     df.index.name = "row"
-    return df
+    return df, noise
 
 
-def caption_note(profile: str, test_metrics: dict, recall: str, n_runs: int) -> str:
+def caption_note(profile: str, test_metrics: dict, recall: str, n_runs: int, n_seeds: int = 1) -> str:
     n = {d: int(test_metrics.get(f"n_gt/{d}", 0)) for d in DIFFICULTIES}
     few = [d for d, v in n.items() if v < 41]
     note = (f"Ours: world_kitti test scenes, profile {profile}, {int(test_metrics.get('frames', 0))} frames; valid "
             f"ground-truth cars easy/moderate/hard {n['easy']}/{n['moderate']}/{n['hard']}; AP_BEV at IoU 0.7 with "
-            f"{recall} unless marked; {n_runs} configurations")
+            f"{recall} unless marked; {n_runs} configurations, mean (± std) over {n_seeds} training seeds")
     if few:
         note += (f"; fewer than 41 valid cars for {', '.join(few)}: even perfect detections score below 100 "
                  "(KITTI devkit sampling)")
     return note
+
+
+def table_frame(table_id: str, config: dict, rows: list, results: dict) -> TableFrame:
+    """One of Tables 1-3 from contract rows (label, run, step), a label repeated once per seed."""
+    ld = config["lidar_detector"]
+    tcfg = ld["tables"][table_id]
+    recall = ld["eval"]["recall"]
+    by_label: dict[str, list[dict]] = {}
+    for label, run, _ in rows:
+        by_label.setdefault(label, []).append(results[run])
+    ours, noise = build_table(tcfg["moderate_label"], by_label, recall=recall, second_iou=float(ld["eval"]["iou"][-1]))
+    own = [run for _, run, _ in rows if not run.startswith(LIFTING)]        # this stage's runs
+    note = caption_note(config["profile"], results[own[0]] if own else {}, recall, len(set(tcfg["rows"].values())),
+                        len(ld["seeds"]))
+    if tcfg.get("lifting_row"):
+        note += (f"; {tcfg['lifting_row']} = the ch. 6 method (lifting.full_method = "
+                 f"{config['lifting']['full_method']}, {len(config['lifting']['seeds'])} seeds) on the same test scenes")
+    return TableFrame(ours=ours, noise=noise, note=note)

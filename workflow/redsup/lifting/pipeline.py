@@ -16,13 +16,13 @@ Test time is the same for every configuration: every detection of the test scene
 """
 from __future__ import annotations
 
-import os
 import time
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from redsup import checkpoint
 from redsup.det3d.template import TemplateSpec, build_template
 from redsup.lifting import data as D
 from redsup.lifting.criterion import build_criterion
@@ -53,20 +53,20 @@ def scene_inputs(scene_dirs, detections, tracks=None) -> list[D.SceneInput]:
             for s, d, t in zip(scene_dirs, detections, tracks)]
 
 
-def save_model(model: torch.nn.Module, spec: dict, cfg: dict, path: str | Path) -> None:
-    """State dict + what rebuilds the network, written to a temporary name and renamed."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".part")
-    state = {k: v.detach().cpu() for k, v in model.state_dict().items()}
-    torch.save({"state_dict": state, "yaw": dict(spec["yaw"]), "network": dict(cfg["network"])}, tmp)
-    os.replace(tmp, path)
+CHECKPOINT_KIND = "lifting"
+
+
+def save_model(model: torch.nn.Module, spec: dict, config: dict, path: str | Path, meta: dict | None = None) -> None:
+    """The one checkpoint format (redsup.checkpoint): the network, the resolved workflow ``config`` and what
+    rebuilds the network (its yaw head and widths), written atomically."""
+    checkpoint.save(path, CHECKPOINT_KIND, {"net": model}, config,
+                    {"yaw": dict(spec["yaw"]), "network": dict(config["lifting"]["network"]), **(meta or {})})
 
 
 def load_model(path: str | Path, device: str | torch.device = "cpu") -> torch.nn.Module:
-    ckpt = torch.load(path, map_location="cpu", weights_only=True)
-    model = build_model(ckpt["network"], ckpt["yaw"])
-    model.load_state_dict(ckpt["state_dict"])
+    ckpt = checkpoint.load(path, CHECKPOINT_KIND)
+    model = build_model(ckpt["meta"]["network"], ckpt["meta"]["yaw"])
+    model.load_state_dict(ckpt["state"]["net"])
     return model.to(device).eval()
 
 

@@ -1,13 +1,35 @@
-"""The lifting stage's jobs as data, for `workflow/rules/lifting.smk` (pure functions of the config and the
-dataset's scene ids; no torch, so the Snakefile parses fast).
+"""The lifting stage's jobs and tables as data (the table contract, ``redsup.tables.contract``): pure
+functions of the config and the dataset's scene ids; no torch, so the Snakefile parses fast.
 
-    lifting_run     results/lifting/{metrics,info}/<run>.json, results/lifting/models/<run>.pt
-    lifting_labels  results/lifting/labels/<run>.npz   (the runs named by some `labels_from`)
-    lifting_table   results/tables/<table>.{md,csv,tex,score.json}
+A run is one configuration (``lifting.runs.<conf>``) trained with one seed index ``k`` of ``lifting.seeds``
+(training seed = the top-level ``seed`` + k); its id is ``<conf>/seed<k>``:
+
+    lifting_run     results/lifting/{metrics,info}/<conf>/seed<k>.json, results/lifting/models/<conf>/seed<k>.pt
+    lifting_labels  results/lifting/labels/<conf>/seed<k>.npz   (the configurations named by some `labels_from`;
+                    seed k's labels supervise seed k of the configuration that reads them)
+    table           results/tables/<table>.{md,csv,tex,score.json} (rule table: one row per label of
+                    ``lifting.tables.<table>.rows``, its value the mean over the seeds, the spread their std)
 """
 from __future__ import annotations
 
-TABLES = ("mccraith_ch6_table1", "mccraith_ch6_table2", "mccraith_ch6_table3", "mccraith_ch6_table4")
+from collections.abc import Mapping
+
+
+def run_id(conf: str, seed: int) -> str:
+    return f"{conf}/seed{int(seed)}"
+
+
+def parse_run(run: str) -> tuple[str, int]:
+    """``<conf>/seed<k>`` -> (conf, k)."""
+    conf, _, seed = run.rpartition("/seed")
+    if not conf or not seed.isdigit():
+        raise ValueError(f"lifting run id {run!r} is not <configuration>/seed<k>")
+    return conf, int(seed)
+
+
+def training_seed(config: Mapping, seed: int) -> int:
+    """The seed a run trains with: the workflow's ``seed`` plus the run's seed index."""
+    return int(config["seed"]) + int(seed)
 
 
 def split_scenes(scene_ids: list[str], splits) -> list[str]:
@@ -25,35 +47,90 @@ def scene_files(dataset: str, scene_ids: list[str], splits, level: str, tracks: 
     return files
 
 
-def run_inputs(cfg: dict, scene_ids: list[str], run: str) -> dict:
-    """Inputs of `lifting_run` for one configuration (cfg = the `lifting` section)."""
-    spec = cfg["runs"][run]
+def result_path(run: str) -> str:
+    """The run's JSON result (KITTI metrics, plus the diagnostics ``diag/*``): what the tables read."""
+    conf, seed = parse_run(run)
+    return f"results/lifting/metrics/{conf}/seed{seed}.json"
+
+
+def labels_path(run: str) -> str:
+    conf, seed = parse_run(run)
+    return f"results/lifting/labels/{conf}/seed{seed}.npz"
+
+
+def model_path(run: str) -> str:
+    conf, seed = parse_run(run)
+    return f"results/lifting/models/{conf}/seed{seed}.pt"
+
+
+def run_inputs(cfg: dict, scene_ids: list[str], conf: str, seed: int) -> dict:
+    """Inputs of `lifting_run` for one configuration and seed (cfg = the `lifting` section)."""
+    spec = cfg["runs"][conf]
     train = scene_files(cfg["dataset"], scene_ids, cfg["train_splits"], spec["level"])
     test = scene_files(cfg["dataset"], scene_ids, [cfg["test_split"]], spec["level"], tracks=False)
     out = {f"train_{k}": v for k, v in train.items()}
     out.update({f"test_{k}": v for k, v in test.items()})
     if spec["targets"] == "labels":
         if spec.get("labels_from") not in cfg["runs"]:
-            raise ValueError(f"lifting.runs.{run}: targets: labels needs labels_from naming a configuration, "
+            raise ValueError(f"lifting.runs.{conf}: targets: labels needs labels_from naming a configuration, "
                              f"got {spec.get('labels_from')!r}")
-        out["labels"] = f"results/lifting/labels/{spec['labels_from']}.npz"
+        out["labels"] = labels_path(run_id(spec["labels_from"], seed))
     return out
 
 
-def labels_inputs(cfg: dict, scene_ids: list[str], run: str) -> dict:
-    """Inputs of `lifting_labels`: the trained model of `run` and its training scenes."""
-    spec = cfg["runs"][run]
+def labels_inputs(cfg: dict, scene_ids: list[str], conf: str, seed: int) -> dict:
+    """Inputs of `lifting_labels`: the trained model of the run and its training scenes."""
+    spec = cfg["runs"][conf]
     files = {f"train_{k}": v for k, v in
              scene_files(cfg["dataset"], scene_ids, cfg["train_splits"], spec["level"]).items()}
-    files["model"] = f"results/lifting/models/{run}.pt"
+    files["model"] = model_path(run_id(conf, seed))
     return files
 
 
-def table_runs(cfg: dict, table: str) -> list[str]:
-    return sorted(set(cfg["tables"][table].values()))
+def runs(config: Mapping, scenes_of=None) -> dict[str, dict]:
+    """Every configuration x seed: run id -> {configuration, seed, training_seed, spec}."""
+    cfg = config["lifting"]
+    return {run_id(conf, k): {"configuration": conf, "seed": int(k), "training_seed": training_seed(config, k),
+                              "spec": dict(spec)}
+            for conf, spec in cfg["runs"].items() for k in cfg["seeds"]}
 
 
-def table_inputs(cfg: dict, table: str) -> dict:
-    runs = table_runs(cfg, table)
-    return {"metrics": [f"results/lifting/metrics/{r}.json" for r in runs],
-            "info": [f"results/lifting/info/{r}.json" for r in runs]}
+def rows(config: Mapping, scenes_of=None) -> dict[str, list[tuple[str, str, None]]]:
+    """Table id -> (row label, run, None), one entry per seed of the row's configuration (a label repeats
+    once per seed; table_frame averages them). ``scenes_of`` is not needed (the rows do not depend on scenes)."""
+    cfg = config["lifting"]
+    out = {}
+    for table, tcfg in cfg["tables"].items():
+        unknown = sorted(set(tcfg["rows"].values()) - set(cfg["runs"]))
+        if unknown:
+            raise ValueError(f"config.yaml lifting.tables.{table}.rows: unknown configurations {unknown}")
+        out[table] = [(label, run_id(conf, k), None) for label, conf in tcfg["rows"].items() for k in cfg["seeds"]]
+    return out
+
+
+def full_method_runs(config: Mapping) -> list[str]:
+    """The runs of ``lifting.full_method`` (one per seed): what chapter 7 reads as the ch. 6 method."""
+    cfg = config["lifting"]
+    if cfg["full_method"] not in cfg["runs"]:
+        raise ValueError(f"config.yaml lifting.full_method: {cfg['full_method']!r} is not a configuration")
+    return [run_id(cfg["full_method"], k) for k in cfg["seeds"]]
+
+
+def tables_of(config: Mapping, run: str) -> list[str]:
+    """Every table whose rows read ``run`` (a run shared by several tables is listed by all of them)."""
+    return [t for t, rs in rows(config).items() if any(r == run for _, r, _ in rs)]
+
+
+def tables_of_labels(config: Mapping, run: str) -> list[str]:
+    """Every table whose rows read a run trained on the labels of ``run``."""
+    cfg = config["lifting"]
+    conf, seed = parse_run(run)
+    readers = [run_id(c, seed) for c, spec in cfg["runs"].items() if spec.get("labels_from") == conf]
+    return list(dict.fromkeys(t for r in readers for t in tables_of(config, r)))
+
+
+def table_frame(table_id: str, config: Mapping, rows: list, results: Mapping):
+    """Our table from the rows' results (redsup.lifting.tables.table_frame)."""
+    from redsup.lifting.tables import table_frame as frame
+
+    return frame(table_id, config, rows, results)

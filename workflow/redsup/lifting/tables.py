@@ -2,27 +2,20 @@
 
 Columns as in paper_values.csv: `AP_BEV Easy` ... `AP_3D Hard` at the table IoU (0.5) with 40 recall points
 (R40), then the same with the 11-point AP (`... (R11)`, ours only; the thesis does not say which it
-reports). Rows: `lifting.tables.<table>` maps each row label to the configuration that produces it.
+reports). Rows: `lifting.tables.<table>.rows` maps each row label to the configuration that produces it;
+each configuration is trained once per seed of `lifting.seeds`: a cell is the seed mean, its noise record
+the per-seed values (`redsup.tables.noise.seeds`). What differs between the tables is their config section
+(`rows`, `note`), never their id.
 """
 from __future__ import annotations
 
+import numpy as np
 import pandas as pd
 
+from redsup.tables.contract import TableFrame
+from redsup.tables.noise import seeds as seed_record
+
 DIFFICULTIES = ("easy", "moderate", "hard")
-TABLE_NOTES = {
-    "mccraith_ch6_table1": "2D Box = the LiDAR points in the 2D box frustum at training and test time, 2D Mask = "
-                           "the points in the mask (L_m)",
-    "mccraith_ch6_table2": "arctan regresses (x1, x2) and trains the yaw through the loss at atan2(x1, x2); "
-                           "rows (b), (c) are our implementations of the mechanisms the thesis names (it gives no "
-                           "details): (b) yaw hypotheses, winner takes all, a selector learns the winner; (c) "
-                           "hypotheses weighted by softmax(-loss / T), a selector learns those weights",
-    "mccraith_ch6_table3": "(e) is our network trained on ground-truth boxes of all cars (the fully supervised "
-                           "reference), tested on the same masks as (d); (a), (b) are the literature's numbers, "
-                           "not reproduced",
-    "mccraith_ch6_table4": "original GT = every ground-truth car (the detection's L_m where one matches, else the "
-                           "LiDAR points in the car's ground-truth instance mask); our labels = the boxes our "
-                           "full method lifts from the training detections (no ground truth)",
-}
 
 
 def row_summary(rows: dict[str, str], runs: dict[str, dict]) -> str:
@@ -37,6 +30,8 @@ def row_summary(rows: dict[str, str], runs: dict[str, dict]) -> str:
             f"{spec['point_loss']}, {'+'.join(spec['terms'])}"
         parts.append(f"{label} = {run} ({spec['points']} points, {spec['level']} detector, {loss}, {yaw_text})")
     return "; ".join(parts)
+
+
 METRICS = (("bev", "AP_BEV"), ("3d", "AP_3D"))
 
 
@@ -54,32 +49,6 @@ def table_columns(metrics: dict, iou: float = 0.5) -> dict[str, float]:
 DIAGNOSTICS = {"diag/bev_centre_within_1m": "centre < 1 m (%)", "diag/yaw_within_20deg_mod_pi": "yaw < 20° (%)"}
 
 
-def build_table(rows: dict[str, str], metrics_by_run: dict[str, dict], iou: float = 0.5,
-                info_by_run: dict[str, dict] | None = None) -> pd.DataFrame:
-    """Rows (label -> configuration) with their cells, indexed by the row label. With `info_by_run`, two
-    diagnostic columns (ours only): the share of test detections matched to a car whose lifted centre is
-    within 1 m (BEV) and whose yaw is within 20 degrees (modulo 180) of the ground truth."""
-    missing = sorted({run for run in rows.values() if run not in metrics_by_run})
-    if missing:
-        raise KeyError(f"no metrics for configurations {missing}")
-    lines = []
-    for label, run in rows.items():
-        line = {"row": label, **table_columns(metrics_by_run[run], iou)}
-        if info_by_run is not None:
-            info = info_by_run.get(run, {})
-            line.update({name: 100 * float(info.get(key, float("nan"))) for key, name in DIAGNOSTICS.items()})
-        lines.append(line)
-    return pd.DataFrame(lines).set_index("row")
-
-
-def parent_table(tables: dict[str, dict[str, str]], run: str) -> str:
-    """The first table with a row produced by `run` (the MLflow parent of its child run)."""
-    for table_id, rows in tables.items():
-        if run in rows.values():
-            return table_id
-    return next(iter(tables))
-
-
 def gt_count_note(infos: dict[str, dict]) -> str:
     """Caption note: valid ground-truth cars per difficulty on the test scenes (AP needs >= 41), from any
     run's metrics (`n_gt/<difficulty>`)."""
@@ -91,3 +60,41 @@ def gt_count_note(infos: dict[str, dict]) -> str:
     warn = (f"; fewer than 41 in {', '.join(low)}: even perfect boxes score below 100 there (KITTI devkit)"
             if low else "")
     return "valid test cars " + ", ".join(counts) + warn
+
+
+def seed_table(rows: list, results: dict, iou: float = 0.5) -> tuple[pd.DataFrame, dict]:
+    """(ours, noise) from contract rows (label, run, step) where a label repeats once per seed: each cell is
+    the mean over the label's runs, its noise the seed record of their values (diagnostic columns too)."""
+    by_label: dict[str, list[str]] = {}
+    for label, run, _ in rows:
+        by_label.setdefault(label, []).append(run)
+    missing = sorted({run for runs in by_label.values() for run in runs if run not in results})
+    if missing:
+        raise KeyError(f"no results for runs {missing}")
+    lines, noise = [], {}
+    for label, runs in by_label.items():
+        cells = [table_columns(results[r], iou) | {name: 100 * float(results[r].get(key, float("nan")))
+                                                   for key, name in DIAGNOSTICS.items()} for r in runs]
+        cols = list(cells[0])
+        lines.append({"row": label, **{c: float(np.mean([x[c] for x in cells])) for c in cols}})
+        noise[label] = {c: seed_record([x[c] for x in cells]) for c in cols}
+    return pd.DataFrame(lines).set_index("row"), noise
+
+
+def table_frame(table_id: str, config: dict, rows: list, results: dict) -> TableFrame:
+    """One of Tables I-IV: rows from `lifting.tables.<table_id>.rows` (contract rows), the caption from its
+    `note`."""
+    cfg = config["lifting"]
+    tcfg = cfg["tables"][table_id]
+    iou = float(cfg["eval"]["table_iou"])
+    ours, noise = seed_table(rows, results, iou)
+    note = (f"Ours: {cfg['dataset']} test scenes, profile {config['profile']}, mean (± std) over "
+            f"{len(cfg['seeds'])} training seeds ({', '.join(str(int(config['seed']) + k) for k in cfg['seeds'])}); "
+            f"AP at IoU {iou:g} with 40 recall points (R40), the 11-point AP in the (R11) "
+            "columns; 2D box heights of the difficulty cuts in KITTI-camera pixels; box size fixed to the "
+            "template's 3.9 x 1.6 x 1.5 m; score = mask score; the last two columns: share of the test detections "
+            "matched to a car with the lifted centre within 1 m and the yaw within 20 degrees (mod 180); "
+            + (tcfg.get("note") or "") + "; "
+            + gt_count_note({r: results[r] for _, r, _ in rows[:1]}) + ". Rows: "
+            + row_summary(tcfg["rows"], cfg["runs"]))
+    return TableFrame(ours=ours, noise=noise, note=note)
