@@ -371,7 +371,8 @@ def test_build_split_counts_bad_input_and_train_stays_finite(tmp_path, tmpl):
 
 # ------------------------------------------------------------------------------------------- tables
 def _ld_config():
-    ld = {"dataset": "world_kitti", "level": "cityscapes", "seeds": [0, 1], "eval": {"recall": "R40", "iou": [0.7, 0.5]},
+    ld = {"dataset": "world_kitti", "level": "cityscapes", "seeds": [0, 1],
+          "eval": {"recall": "R40", "iou": [0.7, 0.5]},
           "runs": {"a": {}, "b": {}},
           "tables": {"mccraith_ch7_table1": {"moderate_label": "Moderate", "lifting_row": "McCraith et al. [2022] †",
                                              "rows": {"ours†": "a", "CenterPoint † Yin et al. [2021]": "b"}},

@@ -371,8 +371,8 @@ def _plan_config():
     lift = {"dataset": "w", "train_splits": ["train", "long"], "test_split": "test", "seeds": [0, 1, 2],
             "eval": {"table_iou": 0.5},
             "runs": {"a": spec,
-                     "b": {"points": "mask", "level": "cityscapes", "point_loss": "squared", "terms": ["supervised_box"],
-                           "yaw": {"kind": "bins", "n_bins": 64}, "targets": "labels", "labels_from": "a"}},
+                     "b": {"points": "mask", "level": "cityscapes", "point_loss": "squared",
+                           "terms": ["supervised_box"], "yaw": {"kind": "bins", "n_bins": 64}, "targets": "labels", "labels_from": "a"}},
             "tables": {"t1": {"rows": {"(x)": "a", "(y)": "b"}, "note": "N1"}, "t2": {"rows": {"(z)": "a"}}},
             "full_method": "a"}
     return {"seed": 100, "profile": "tiny", "lifting": lift}

@@ -35,8 +35,8 @@ grid = GridSpec.from_config(cfg["grid"])
 train_spec = TrainSpec.from_config(cfg["train"] | {"min_points": cfg["min_points"], "max_points": cfg["max_points"]})
 with child_run(sm.log.run, tables[0], name, rule=sm.rule, wildcards=dict(sm.wildcards), config=sm.config,
                params={"run": cfg["runs"][conf], "tables": tables, "seed": seed, "grid": cfg["grid"],
-                       "train": cfg["train"], "augment": cfg["augment"], "network": cfg["network"], "yaw_bins": cfg["yaw_bins"],
-                       "device": device}) as run:
+                       "train": cfg["train"], "augment": cfg["augment"], "network": cfg["network"],
+                       "yaw_bins": cfg["yaw_bins"], "device": device}) as run:
     train_data, test_data = load_split(sm.input.train), load_split(sm.input.test)
     print(f"{name}: {run_spec}; {train_data.n_frames} training frames, {test_data.n_frames} test frames; "
           f"data counts train {train_data.counts} test {test_data.counts}")

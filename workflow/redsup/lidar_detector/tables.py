@@ -90,5 +90,6 @@ def table_frame(table_id: str, config: dict, rows: list, results: dict) -> Table
                         len(ld["seeds"]))
     if tcfg.get("lifting_row"):
         note += (f"; {tcfg['lifting_row']} = the ch. 6 method (lifting.full_method = "
-                 f"{config['lifting']['full_method']}, {len(config['lifting']['seeds'])} seeds) on the same test scenes")
+                 f"{config['lifting']['full_method']}, {len(config['lifting']['seeds'])} seeds) on the same test "
+                 "scenes")
     return TableFrame(ours=ours, noise=noise, note=note)
