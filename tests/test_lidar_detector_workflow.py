@@ -66,5 +66,16 @@ def test_tables_have_paper_values_and_scores(built, cfg):
         assert (built / f"results/tables/{table_id}.tex").exists()
     t1 = pd.read_csv(built / "results/tables/mccraith_ch7_table1.csv").set_index("row")
     assert t1.loc["McCraith et al. [2022] †", "status"] == "ours + paper"      # the ch. 6 stage's numbers
+    # ... read through lifting.full_method: the mean over the lifting seeds of that configuration
+    root = Path(__file__).resolve().parents[1]
+    raw = yaml.safe_load((root / "config.yaml").read_text())
+    raw["profile"] = "tiny"
+    lift = resolve(raw)["lifting"]
+    per_seed = [json.loads((built / f"results/lifting/metrics/{lift['full_method']}/seed{k}.json").read_text())
+                ["Car_bev_0.7/moderate_R40"] for k in lift["seeds"]]
+    assert len(per_seed) == 2 and cfg["tables"]["mccraith_ch7_table1"]["lifting_row"] == "McCraith et al. [2022] †"
+    assert t1.loc["McCraith et al. [2022] †", "AP_BEV Moderate (ours)"] == pytest.approx(np.mean(per_seed), abs=1e-6)
+    assert t1.loc["McCraith et al. [2022] †", "AP_BEV Moderate (ours) std"] == pytest.approx(
+        np.std(per_seed, ddof=1), abs=1e-6)
     scorecard = (built / "results/tables/scorecard.md").read_text()
     assert all(t in scorecard for t in TABLES)
