@@ -1,4 +1,4 @@
-"""McCraith ch. 6 Tables I-IV from the per-configuration metrics (`results/lifting/metrics/<run>.json`).
+"""McCraith ch. 6 Tables I-IV from the runs' results (`results/lifting/metrics/<configuration>/seed<k>.json`).
 
 Columns as in paper_values.csv: `AP_BEV Easy` ... `AP_3D Hard` at the table IoU (0.5) with 40 recall points
 (R40), then the same with the 11-point AP (`... (R11)`, ours only; the thesis does not say which it
