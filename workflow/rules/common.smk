@@ -85,6 +85,25 @@ PREPARED_TARGETS = (
 # Every table and figure id comes from tables.yaml (workflow/redsup/data); a figure also has its table.
 TABLE_IDS = table_contract.table_ids()
 FIGURE_IDS = table_contract.table_ids("figure") + ["world_frame_overview"]
+# table id -> [(row label, run, step)] from every stage's plan (redsup.tables.contract); rule table's inputs
+TABLE_ROWS = table_contract.all_rows(config, scenes_of)
+# TRANSITION (while stages move to the contract): the tables whose stage plan has table_frame
+def _on_contract(table):
+    try:
+        return hasattr(table_contract.plan_of(table), "table_frame")
+    except ModuleNotFoundError:
+        return False
+
+
+CONTRACT_TABLE_IDS = [t for t in TABLE_IDS if _on_contract(t)]
+
+
+def get_table_inputs(wildcards):
+    """The result file of every run the table's rows read, each once."""
+    plan = table_contract.plan_of(wildcards.table)
+    return list(dict.fromkeys(plan.result_path(run) for _, run, _ in TABLE_ROWS.get(wildcards.table, [])))
+
+
 # the scene shown in the overview figure: the first test scene of the first dataset that has one
 OVERVIEW_SCENE = next((f"{d}/{s}" for d, s in ALL_SCENES if s.startswith("test")), None)
 

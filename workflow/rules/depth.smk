@@ -8,7 +8,6 @@
 # same run share one depth_eval job.
 import re
 
-import redsup.depth.configs as depth_configs
 import redsup.depth.plan as depth_plan
 
 DEPTH_RUNS = depth_plan.runs(config, scenes_of)
@@ -16,14 +15,9 @@ DEPTH_MODELS = depth_plan.models(config, scenes_of)  # <dataset>/<mode>[/seed<k>
 DEPTH_FIGURES = [t for t in FIGURE_IDS if "figure" in config["depth"]["tables"].get(t, {})]
 
 
-def _train_inputs(wildcards):
-    dataset, mode, _ = depth_configs.parse_model(wildcards.model)
-    return depth_configs.train_inputs(config, dataset, mode, scenes_of(dataset))
-
-
 rule train_depth:
     input:
-        unpack(_train_inputs),
+        unpack(lambda wc: depth_plan.train_files(config, wc.model, scenes_of)),
     output:
         "results/depth/models/{model}.pt",
     log:

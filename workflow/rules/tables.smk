@@ -1,24 +1,8 @@
 # Every table through one rule (the table contract, redsup.tables.contract): its rows come from the stage's
 # plan, its inputs are the result files of their runs, one script writes it beside the thesis' numbers.
 # Included last. TABLE_IDS / FIGURE_IDS come from tables.yaml alone (common.smk).
-TABLE_ROWS = table_contract.all_rows(config, scenes_of)
-# TRANSITION (while stages move to the contract): the tables whose stage plan has table_frame
-def _on_contract(table):
-    try:
-        return hasattr(table_contract.plan_of(table), "table_frame")
-    except ModuleNotFoundError:
-        return False
-
-
-CONTRACT_TABLE_IDS = [t for t in TABLE_IDS if _on_contract(t)]
 TABLE_TARGETS = expand("results/tables/{table}.{ext}", table=TABLE_IDS, ext=("md", "csv", "tex"))
 FIGURE_TARGETS = expand("results/figures/{figure}.png", figure=FIGURE_IDS)
-
-
-def get_table_inputs(wildcards):
-    """The result file of every run the table's rows read, each once."""
-    plan = table_contract.plan_of(wildcards.table)
-    return list(dict.fromkeys(plan.result_path(run) for _, run, _ in TABLE_ROWS.get(wildcards.table, [])))
 
 
 rule table:

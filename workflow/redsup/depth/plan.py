@@ -199,6 +199,14 @@ def model_parent(config: Mapping, model: str) -> str:
     return used[0] if used else "data_preparation"
 
 
+def train_files(config: Mapping, model: str, scenes_of) -> dict:
+    """Inputs of ``train_depth`` for one model id ``<dataset>/<mode>[/seed<k>]``."""
+    from redsup.depth.configs import train_inputs
+
+    dataset, mode, _ = parse_model(model)
+    return train_inputs(config, dataset, mode, scenes_of(dataset))
+
+
 def eval_files(config: Mapping, run: Mapping, scenes_of) -> dict:
     """Inputs of ``depth_eval`` for one run of ``runs``."""
     spec = spec_of(run)
