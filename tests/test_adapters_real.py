@@ -14,6 +14,7 @@ from conftest import ROOT, run_snakemake
 from redsup import geometry, sceneio
 from redsup.adapters import adapt_scene, scene_ids
 from redsup.adapters.tusimple import adapt_clips
+from redsup.det3d import eval_frame
 from redsup.det3d.kitti_eval import FrameDet, evaluate
 from redsup.det3d.scenes import gt_frames
 from redsup.depth.evaluation import garg_crop_mask
@@ -58,8 +59,11 @@ def test_lidar_points_of_each_car_project_into_its_2d_box(object_scenes):
         vehicle = geometry.transform_points(extr["lidar_top"],
                                             sceneio.read_lidar(scene / "lidar_top" / "000000.bin")[:, :3].astype(float))
         camera = geometry.transform_points(geometry.invert_pose(extr["cam_front"]), vehicle)
+        T_eval = eval_frame.scene_eval_transform(scene)       # n_lidar: counted upright in rect0, as the devkit
+        points_eval = geometry.transform_points(T_eval, vehicle)
         for _, car in boxes[boxes.cls == "Car"].iterrows():
-            inside = points_in_box(vehicle, car[["x", "y", "z", "l", "w", "h", "yaw"]].to_numpy(float))
+            box = eval_frame.to_eval_frame(car[["x", "y", "z", "l", "w", "h", "yaw"]].to_numpy(float), T_eval)[0]
+            inside = points_in_box(points_eval, box)
             assert inside.sum() == car.n_lidar >= 5
             uv, z = geometry.project(K, camera[inside])
             in_2d = ((uv[:, 0] >= car.x1 - 2) & (uv[:, 0] <= car.x2 + 2)

@@ -26,6 +26,7 @@ from redsup import geometry
 from redsup.adapters.common import (AdapterError, SceneWriter, expect_size, image_size, list_frames, read_kv_file,
                                     rigid, translation)
 from redsup.adapters.frames2d import Frames2D
+from redsup.det3d import eval_frame
 from redsup.prep.boxes3d import points_in_box
 from redsup.sceneio import BOX_COLUMNS, frame_name, read_lidar
 
@@ -132,7 +133,11 @@ def read_labels(path: Path) -> list[dict]:
 
 
 def label_to_row(label: dict, frame: int, track_id: int, T_vehicle_rect0: np.ndarray) -> dict:
-    """A boxes.csv row: geometric centre and heading moved from rectified camera 0 to the vehicle frame."""
+    """A boxes.csv row: geometric centre and heading moved from rectified camera 0 to the vehicle frame.
+
+    The vehicle-frame yaw is the heading whose projection back onto the camera's horizontal plane is the
+    label's (`redsup.det3d.eval_frame`): evaluation moves the box back upright into the camera frame and
+    gets the label's own box, as the KITTI devkit uses it."""
     row = {c: float("nan") for c in BOX_COLUMNS}
     row.update(frame=frame, track_id=track_id, cls=label["cls"], occlusion=int(label["occlusion"]),
                truncation=label["truncation"], x1=label["x1"], y1=label["y1"], x2=label["x2"], y2=label["y2"])
@@ -141,7 +146,8 @@ def label_to_row(label: dict, frame: int, track_id: int, T_vehicle_rect0: np.nda
     centre = np.array([label["cx"], label["cy"] - label["h"] / 2.0, label["cz"]])
     heading = np.array([math.cos(label["ry"]), 0.0, -math.sin(label["ry"])])
     c = geometry.transform_points(T_vehicle_rect0, centre[None])[0]
-    d = T_vehicle_rect0[:3, :3] @ heading
+    d = eval_frame.heading_keeping_projection(T_vehicle_rect0[:3, :3], heading, np.array([0.0, -1.0, 0.0]),
+                                              np.array([0.0, 0.0, 1.0]))
     row.update(x=c[0], y=c[1], z=c[2], l=label["l"], w=label["w"], h=label["h"], yaw=math.atan2(d[1], d[0]))
     return row
 
@@ -282,8 +288,8 @@ def adapt_raw(dataset: str, spec: dict, scene: str, out_dir: str | Path, seed: i
     T_velo_imu = rigid(expect_size(imu_path, "R", imu["R"], 9), expect_size(imu_path, "T", imu["T"], 3))
     projections = {c: expect_size(cam2cam_path, f"P_rect_{RAW_CAMERAS[c]}", cam2cam[f"P_rect_{RAW_CAMERAS[c]}"], 12)
                    for c in cameras}
-    Ks, extrinsics, _ = rig(projections, expect_size(cam2cam_path, "R_rect_00", cam2cam["R_rect_00"], 9),
-                            T_cam0_velo, T_velo_imu, float(spec.get("imu_height", 0.93)))
+    Ks, extrinsics, T_vehicle_rect0 = rig(projections, expect_size(cam2cam_path, "R_rect_00", cam2cam["R_rect_00"], 9),
+                                          T_cam0_velo, T_velo_imu, float(spec.get("imu_height", 0.93)))
     all_frames = list_frames(drive_dir / "image_02" / "data", (".png",))
     stems = [p.stem for p in all_frames[entry["start"]:entry["start"] + entry["count"]]]
     n = len(stems)
@@ -320,6 +326,7 @@ def adapt_raw(dataset: str, spec: dict, scene: str, out_dir: str | Path, seed: i
         meta = _base_meta(Path(out_dir).name, dataset, "kitti_raw", entry["split"], n, cameras, seed)
         meta.update(source={"kind": "kitti_raw", "drive": entry["drive"], "path": str(drive_dir),
                             "frames": stems}, ego_poses=pose_source, depth_convention=convention,
+                    eval_frame=eval_frame.meta_entry(T_vehicle_rect0),
                     split_frames=entry["split_frames"], **frames2d.meta())
         w.write_meta(meta)
     return {"frames": n, "cameras": len(cameras), "poses_from_oxts": float(pose_source == "oxts"),
@@ -347,14 +354,15 @@ def adapt_object(dataset: str, spec: dict, scene: str, out_dir: str | Path, seed
                                           T_cam0_velo, T_velo_imu, float(spec.get("imu_height", 0.93)))
     sweep = root / "velodyne" / f"{fid}.bin"
     points = read_lidar(sweep)
-    points_vehicle = geometry.transform_points(extrinsics["lidar_top"], points[:, :3].astype(np.float64))
+    T_eval_vehicle = eval_frame.eval_transform(T_vehicle_rect0)
+    points_eval = geometry.transform_points(T_eval_vehicle @ extrinsics["lidar_top"], points[:, :3].astype(np.float64))
     label_path = root / "label_2" / f"{fid}.txt"
     labels = read_labels(label_path) if spec.get("subset", "training") == "training" else []
     rows = [label_to_row(lab, 0, k + 1, T_vehicle_rect0) for k, lab in enumerate(labels)]
-    for row in rows:
-        if np.isfinite(row["x"]):
-            box = [row[k] for k in ("x", "y", "z", "l", "w", "h", "yaw")]
-            row["n_lidar"] = int(points_in_box(points_vehicle, box).sum())
+    for lab, row in zip(labels, rows):
+        if np.isfinite(row["x"]):      # counted in the devkit's frame: the label's box upright in rect0
+            box = eval_frame.label_box(*(lab[k] for k in ("cx", "cy", "cz", "h", "w", "l", "ry")))
+            row["n_lidar"] = int(points_in_box(points_eval, box).sum())
     frames2d = Frames2D(spec, spec["path"])
     with SceneWriter(out_dir, link=not spec.get("copy_files", False)) as w:
         for camera in cameras:
@@ -370,7 +378,8 @@ def adapt_object(dataset: str, spec: dict, scene: str, out_dir: str | Path, seed
         w.write_boxes(rows)
         meta = _base_meta(Path(out_dir).name, dataset, "kitti_object", entry["split"], 1, cameras, seed)
         meta.update(source={"kind": "kitti_object", "frame": fid, "path": str(root)},
-                    ego_poses="identity (single frame)", **frames2d.meta())
+                    ego_poses="identity (single frame)", eval_frame=eval_frame.meta_entry(T_vehicle_rect0),
+                    **frames2d.meta())
         w.write_meta(meta)
     n_objects = sum(1 for r in rows if str(r["cls"]).lower() != "dontcare")
     return {"frames": 1, "objects": n_objects, "cars": sum(1 for r in rows if str(r["cls"]).lower() == "car"),

@@ -277,3 +277,53 @@ def evaluate(gts: list[FrameGT], dets: list[FrameDet], classes: tuple[str, ...] 
                     tp, fp, _ = _second_pass(ov, dc_ov, prep, thr, t)
                     results[f"{key}_R11"], results[f"{key}_R40"] = _ap_from_counts(tp, fp)
     return results
+
+
+# ------------------------------------------------------------------------------------------------ command
+CLI_THRESHOLDS = {"Car": 0.7, "Van": 0.7, "Pedestrian": 0.5, "Cyclist": 0.5, "Person_sitting": 0.5}
+CLI_HELP = """KITTI object AP of a detection folder against a ground-truth folder, printed as one JSON object.
+
+Both folders hold KITTI label_2 files, one <frame>.txt per frame, one object per line:
+  type truncated occluded alpha x1 y1 x2 y2 h w l x y z rotation_y [score]
+(2D box in pixels; dimensions in metres; location = bottom centre in the rectified camera 0 frame).
+Ground truth has 15 fields; detections 16, the 16th the score. Frames are the ground-truth files; a
+frame without a detection file has no detections.
+
+Output keys: {class}_{2d|bev|3d}_{iou}/{easy|moderate|hard}_{R11|R40}, AP in percent, for every class of
+Car, Van, Pedestrian, Cyclist, Person_sitting present in the ground truth, at its standard IoU (Car and
+Van 0.7, the others 0.5) and at 0.5. Same rules as the devkit (`evaluate_object.cpp`) and its python
+port: difficulty cuts, Van / Person_sitting ignored for Car / Pedestrian, DontCare regions (2D), 41
+recall points (R11: every 4th, R40: points 1..40). 3D / BEV boxes are upright in the rectified camera
+frame, as the devkit; --calib moves every box through the workflow's vehicle frame and back (the
+workflow's own path; the numbers stay the devkit's). NaN: no valid ground truth for that cell.
+"""
+
+
+def main(argv: list[str] | None = None) -> int:
+    import argparse
+    import json
+    import sys
+
+    from redsup.det3d.kitti_files import KittiFileError, read_folders
+
+    ap = argparse.ArgumentParser(prog="python -m redsup.det3d.kitti_eval", description=CLI_HELP,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--gt", required=True, help="ground-truth label folder (15 fields per line)")
+    ap.add_argument("--det", required=True, help="detection folder (16 fields per line, score last)")
+    ap.add_argument("--calib", default=None, help="optional object-benchmark calib folder (<frame>.txt)")
+    args = ap.parse_args(argv)
+    try:
+        _, gts, dets = read_folders(args.gt, args.det, args.calib)
+    except (KittiFileError, OSError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    names = {str(c) for g in gts for c in g.cls}
+    classes = tuple(c for c in CLI_THRESHOLDS if c in names)
+    thr = {c: tuple(sorted({CLI_THRESHOLDS[c], 0.5}, reverse=True)) for c in classes}
+    result = evaluate(gts, dets, classes=classes, metrics=METRICS, iou_thresholds=thr)
+    print(json.dumps(result, indent=1, sort_keys=True))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

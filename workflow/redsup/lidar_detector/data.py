@@ -12,7 +12,7 @@ The cache (`save_split` / `load_split`) is one npz per split:
 
 | key | content |
 |---|---|
-| `scenes` (S,) | scene ids; `cam_K` (S, 3, 3), `cam_T` (S, 4, 4) T_camera_vehicle, `cam_size` (S, 2) (W, H) |
+| `scenes` (S,) | scene ids; `cam_K` (S, 3, 3), `cam_T` (S, 4, 4) T_camera_vehicle, `cam_size` (S, 2) (W, H); `eval_T` (S, 4, 4) T_eval_vehicle (`redsup.det3d.eval_frame`; identity: vehicle frame) |
 | `frame_scene`, `frame_index` (F,) | scene of each frame and its index in the scene |
 | `points` (P, 4), `point_offsets` (F + 1,) | FOV-cropped sweep of frame f: points[offsets[f]:offsets[f + 1]], vehicle frame x, y, z, reflectance |
 | `obj_frame`, `obj_score` (O,), `obj_points` (Q, 3), `obj_offsets` (O + 1,) | kept masks and their finite L_m points (vehicle frame) |
@@ -29,6 +29,7 @@ import numpy as np
 
 from redsup import geometry, sceneio
 from redsup.det3d import scenes as det_scenes
+from redsup.det3d import eval_frame
 from redsup.det3d.kitti_eval import FrameGT
 from redsup.fileio import save_npz_atomic
 
@@ -89,7 +90,7 @@ def build_split(scene_dirs: list[str | Path], detection_paths: list[str | Path],
     if len(scene_dirs) != len(detection_paths):
         raise ValueError(f"{len(scene_dirs)} scenes but {len(detection_paths)} detection files")
     rep = SplitReport()
-    scenes, cam_K, cam_T, cam_size = [], [], [], []
+    scenes, cam_K, cam_T, cam_size, eval_T = [], [], [], [], []
     frame_scene, frame_index, pts_list = [], [], []
     obj_frame, obj_score, obj_pts, obj_matched = [], [], [], []
     gt_parts = []
@@ -102,6 +103,8 @@ def build_split(scene_dirs: list[str | Path], detection_paths: list[str | Path],
         cam_K.append(K)
         cam_T.append(T_cam)
         cam_size.append(size)
+        T_eval = eval_frame.scene_eval_transform(scene_dir)
+        eval_T.append(np.eye(4) if T_eval is None else T_eval)
         objs = det_scenes.object_set(scene_dir, det_path)
         boxes = sceneio.read_boxes(scene_dir / "gt" / "boxes.csv")
         frames = list(range(0, int(meta["n_frames"]), max(1, int(frame_stride))))
@@ -159,6 +162,7 @@ def build_split(scene_dirs: list[str | Path], detection_paths: list[str | Path],
     arrays = dict(
         scenes=np.array(scenes, dtype="U32"), cam_K=np.array(cam_K, dtype=np.float64).reshape(-1, 3, 3),
         cam_T=np.array(cam_T, dtype=np.float64).reshape(-1, 4, 4), cam_size=np.array(cam_size, dtype=np.int64).reshape(-1, 2),
+        eval_T=np.array(eval_T, dtype=np.float64).reshape(-1, 4, 4),
         frame_scene=np.array(frame_scene, dtype=np.int64), frame_index=np.array(frame_index, dtype=np.int64),
         points=np.concatenate(pts_list) if pts_list else np.zeros((0, 4), np.float32),
         point_offsets=_offsets([len(p) for p in pts_list]),
@@ -231,6 +235,13 @@ class SplitData:
         s = int(self.arrays["frame_scene"][f])
         w, h = self.arrays["cam_size"][s]
         return self.arrays["cam_K"][s], self.arrays["cam_T"][s], (int(w), int(h))
+
+    def eval_transform(self, f: int) -> np.ndarray | None:
+        """T_eval_vehicle of frame f's scene (KITTI: upright rect0, `redsup.det3d.eval_frame`), or None."""
+        if "eval_T" not in self.arrays:
+            return None
+        T = self.arrays["eval_T"][int(self.arrays["frame_scene"][f])]
+        return None if np.allclose(T, np.eye(4)) else T
 
     def __post_init__(self):
         a = self.arrays

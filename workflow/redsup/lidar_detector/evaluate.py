@@ -15,7 +15,7 @@ import time
 import numpy as np
 import torch
 
-from redsup.det3d import kitti_eval
+from redsup.det3d import eval_frame, kitti_eval
 from redsup.det3d.kitti_eval import FrameDet, FrameGT
 from redsup.det3d.kitti_pixels import kitti_pixel_scale, scale_frames
 from redsup.lidar_detector.data import SplitData
@@ -60,12 +60,12 @@ def evaluate_split(model: CenterDetector, data: SplitData, grid: GridSpec, spec:
                    kitti_pixels: bool = True) -> tuple[dict, list[FrameDet]]:
     """(metrics, detections in the world camera's pixels) of `model` on every frame of `data`."""
     dets, seconds = predict(model, data, grid, spec, template_size, device)
-    gts = [data.frame_gt(f) for f in range(data.n_frames)]
-    eval_dets = dets
+    gts = [eval_frame.frames_to_eval([data.frame_gt(f)], data.eval_transform(f))[0] for f in range(data.n_frames)]
+    eval_dets = [eval_frame.frames_to_eval([d], data.eval_transform(f))[0] for f, d in enumerate(dets)]
     if kitti_pixels:
         scales = [kitti_pixel_scale(data.camera(f)[0]) for f in range(data.n_frames)]
         gts = [scale_frames([g], s)[0] for g, s in zip(gts, scales)]
-        eval_dets = [scale_frames([d], s)[0] for d, s in zip(dets, scales)]
+        eval_dets = [scale_frames([d], s)[0] for d, s in zip(eval_dets, scales)]
     metrics = kitti_eval.evaluate(gts, eval_dets, metrics=("bev", "3d"), iou_thresholds={"Car": tuple(iou_thresholds)})
     metrics.update({k: float(v) for k, v in valid_gt_counts(gts).items()})
     metrics["n_detections"] = float(sum(len(d.score) for d in dets))

@@ -2,7 +2,8 @@
 
 Ground truth = `gt/boxes.csv` of every frame of the scenes (`redsup.det3d.scenes.gt_frames`); 2D boxes of
 ground truth and detections are scaled to KITTI-camera pixels (`redsup.det3d.kitti_pixels`) so that the
-easy / moderate / hard height cuts mean what they mean on KITTI. Detections that could not be lifted
+easy / moderate / hard height cuts mean what they mean on KITTI. 3D boxes of KITTI scenes are evaluated
+upright in the rectified camera frame, as the devkit (`redsup.det3d.eval_frame`). Detections that could not be lifted
 (no or too few LiDAR points) are simply absent (a miss if they were a car).
 
 Returns `kitti_eval.evaluate`'s flat dict, e.g. `Car_bev_0.5/moderate_R40`, `Car_3d_0.7/easy_R11`, plus
@@ -15,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from redsup import sceneio
+from redsup.det3d.eval_frame import frames_to_eval, scene_eval_transform
 from redsup.det3d.kitti_eval import DIFFICULTIES, MAX_OCCLUSION, MAX_TRUNCATION, MIN_HEIGHT, evaluate
 from redsup.det3d.kitti_pixels import kitti_pixel_scale, scale_frames
 from redsup.det3d.scenes import gt_frames
@@ -29,9 +31,10 @@ def split_frames(scene_dirs: list[str | Path], table: ObjectTable, boxes: np.nda
     for k, scene_dir in enumerate(scene_dirs):
         K, _ = sceneio.read_intrinsics(Path(scene_dir) / f"{camera}.txt")
         scale = kitti_pixel_scale(K) if reference_focal is None else kitti_pixel_scale(K, reference_focal)
+        T_eval = scene_eval_transform(scene_dir)     # KITTI: upright in rect0, as the devkit
         g = gt_frames(scene_dir)
-        gts += scale_frames(g, scale)
-        dets += scale_frames(frame_detections(table, boxes, k, len(g)), scale)
+        gts += scale_frames(frames_to_eval(g, T_eval), scale)
+        dets += scale_frames(frames_to_eval(frame_detections(table, boxes, k, len(g)), T_eval), scale)
     return gts, dets
 
 
