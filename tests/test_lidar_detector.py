@@ -455,3 +455,34 @@ def test_table_frame_means_and_seed_records():
     frame3 = plan.table_frame("mccraith_ch7_table3", config, plan.rows(config)["mccraith_ch7_table3"],
                               {"a/seed0": _metrics(1, 2, 3), "a/seed1": _metrics(3, 4, 5)})
     assert frame3.ours.loc["2", "AP_BEV Medium"] == 3 and "lifting" not in frame3.note
+
+
+@pytest.mark.parametrize("steps", [3, 20])
+def test_one_cycle_adamw_matches_torch(steps):
+    """The detector's optimiser is torch's AdamW + OneCycleLR (cycled beta1) without torch.optim, step by step,
+    including a skipped (non-finite) step that advances only the schedule and a parameter without gradient."""
+    from redsup.lidar_detector.optim import OneCycleAdamW
+
+    torch.manual_seed(0)
+    a, b = torch.nn.Linear(3, 2), torch.nn.Linear(3, 2)
+    b.load_state_dict(a.state_dict())
+    extra_a, extra_b = torch.nn.Parameter(torch.ones(2)), torch.nn.Parameter(torch.ones(2))
+    mine = OneCycleAdamW(list(a.parameters()) + [extra_a], lr=3e-3, weight_decay=0.01, total_steps=steps,
+                         pct_start=0.3, div_factor=10.0, final_div_factor=100.0)
+    ref = torch.optim.AdamW(list(b.parameters()) + [extra_b], lr=3e-3, weight_decay=0.01)
+    sched = torch.optim.lr_scheduler.OneCycleLR(ref, max_lr=3e-3, total_steps=steps, pct_start=0.3, div_factor=10.0,
+                                                final_div_factor=100.0)
+    x = torch.randn(5, 3)
+    for step in range(steps):
+        assert mine.lr == pytest.approx(sched.get_last_lr()[0], rel=1e-12)
+        assert mine.beta1 == pytest.approx(ref.param_groups[0]["betas"][0], rel=1e-12)
+        for net, opt in ((a, mine), (b, ref)):
+            opt.zero_grad()
+            (net(x) ** 2).sum().backward()
+            if step != 1:                          # step 1: "non-finite", only the schedule moves
+                opt.step()
+        mine.schedule_step()
+        sched.step()
+        assert torch.allclose(a.weight, b.weight, atol=1e-7, rtol=1e-6) and torch.allclose(a.bias, b.bias, atol=1e-7)
+    assert torch.equal(extra_a, extra_b)                                       # never had a gradient
+    assert mine.lr == pytest.approx(sched.get_last_lr()[0], rel=1e-12)

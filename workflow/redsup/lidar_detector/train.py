@@ -23,6 +23,7 @@ from redsup.lidar_detector.criterion import alignment_loss, focal_heatmap_loss, 
 from redsup.lidar_detector.data import SplitData
 from redsup.lidar_detector.grid import GridSpec
 from redsup.lidar_detector.model import CenterDetector
+from redsup.lidar_detector.optim import OneCycleAdamW
 from redsup.lidar_detector.targets import (assign_supervised, assign_weak, heatmap_target, object_radius,
                                            weak_objects)
 
@@ -108,9 +109,9 @@ def train(data: SplitData, run: RunSpec, grid: GridSpec, spec: TrainSpec, aug: A
     gen = torch.Generator(device=device).manual_seed(seed)
     model = build_model(grid, run, n_bins, net).to(device)
     model.train()
-    opt = torch.optim.AdamW(model.parameters(), lr=spec.lr, weight_decay=spec.weight_decay)
-    sched = torch.optim.lr_scheduler.OneCycleLR(opt, max_lr=spec.lr, total_steps=max(spec.steps, 1), pct_start=0.3,
-                                                div_factor=10.0, final_div_factor=100.0)
+    # torch.optim.AdamW + OneCycleLR, without the torch._dynamo import of torch.optim (redsup.lidar_detector.optim)
+    opt = OneCycleAdamW(model.parameters(), lr=spec.lr, weight_decay=spec.weight_decay,
+                        total_steps=max(spec.steps, 1), pct_start=0.3, div_factor=10.0, final_div_factor=100.0)
     bev = grid.bev()
     tmpl = template.to(device=device)
     loss_fn = alignment_loss(run.loss, run.alpha, run.beta)
@@ -164,15 +165,15 @@ def train(data: SplitData, run: RunSpec, grid: GridSpec, spec: TrainSpec, aug: A
             counts["steps_nonfinite"] += 1
             print(f"step {step}: non-finite loss {float(loss)} ({ {k: float(v) for k, v in terms.items()} }); "
                   "step skipped")
-            opt.zero_grad(set_to_none=True)
-            sched.step()
+            opt.zero_grad()
+            opt.schedule_step()
             continue
-        opt.zero_grad(set_to_none=True)
+        opt.zero_grad()
         loss.backward()
         if spec.grad_clip > 0:
             torch.nn.utils.clip_grad_norm_(model.parameters(), spec.grad_clip)
         opt.step()
-        sched.step()
+        opt.schedule_step()
         if ema is not None:
             with torch.no_grad():
                 for k, v in model.named_parameters():
@@ -180,7 +181,7 @@ def train(data: SplitData, run: RunSpec, grid: GridSpec, spec: TrainSpec, aug: A
         for k, v in {"loss": loss, **terms}.items():
             running.setdefault(k, []).append(float(v.detach()))
         if log is not None and ((step + 1) % spec.log_every == 0 or step + 1 == spec.steps):
-            log({f"train/{k}": float(np.mean(v)) for k, v in running.items()} | {"train/lr": sched.get_last_lr()[0]},
+            log({f"train/{k}": float(np.mean(v)) for k, v in running.items()} | {"train/lr": opt.lr},
                 step + 1)
             running = {}
     elapsed = time.perf_counter() - t0
