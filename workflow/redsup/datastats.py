@@ -11,9 +11,12 @@ BIN_EDGES = (20.0, 45.0)  # near < 20 m <= medium < 45 m <= far (TuSimple protoc
 BIN_NAMES = ("near", "medium", "far")
 
 
-def distance_bin(z, edges: tuple[float, float] = BIN_EDGES) -> np.ndarray:
-    """0 near (z < edges[0]), 1 medium, 2 far (z >= edges[1]), by ground-truth forward distance."""
-    return np.digitize(np.asarray(z, dtype=float), edges)
+def distance_bin(z, x=0.0, edges: tuple[float, float] = BIN_EDGES) -> np.ndarray:
+    """0 near (d < edges[0]), 1 medium, 2 far (d >= edges[1]) with d = ||[z, x]||, the length of the
+    ground-truth position (forward z, lateral x), as the TuSimple challenge script
+    (`evaluate/velocity.py`, `get_distance_label`: np.linalg.norm(position))."""
+    d = np.hypot(np.asarray(z, dtype=float), np.asarray(x, dtype=float))
+    return np.digitize(d, edges)
 
 
 def clip_annotations(split_dir: str | Path) -> pd.DataFrame:
@@ -31,7 +34,8 @@ def bin_counts(split_dirs: dict[str, str | Path]) -> pd.DataFrame:
     """Table I layout: rows per split (e.g. Train, Test), columns Near, Medium, Far, Total."""
     table = {}
     for name, folder in split_dirs.items():
-        bins = distance_bin(clip_annotations(folder)["z"].to_numpy())
+        ann = clip_annotations(folder)
+        bins = distance_bin(ann["z"].to_numpy(), ann["x"].to_numpy())
         counts = np.bincount(bins, minlength=3)
         table[name] = {"Near": counts[0], "Medium": counts[1], "Far": counts[2], "Total": counts.sum()}
     return pd.DataFrame.from_dict(table, orient="index").astype(int)

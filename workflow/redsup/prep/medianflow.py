@@ -12,7 +12,7 @@ naming the file. Only a split with no usable clip at all is an error.
 
 `medianflow.npz` per clip split (N vehicles, T frames): clip (N,) int64, track_id (N,) int64, boxes
 (N, T, 4) float32 x, y, w, h, failed (N, T) bool, velocity (N, 2) [vz, vx], position (N, 2) [z, x] (TuSimple order),
-distance (N,) = position z, bin (N,) str near / medium / far, bin_index (N,) int8 (0, 1, 2).
+distance (N,) = position z, bin (N,) (by ||[z, x]||, as the TuSimple challenge script) str near / medium / far, bin_index (N,) int8 (0, 1, 2).
 """
 from __future__ import annotations
 
@@ -146,7 +146,7 @@ def track_split(split_dir: str | Path, medianflow_cfg: dict) -> tuple[dict, dict
             cols["failed"].append(failed)
             cols["velocity"].append(a["velocity"])
             cols["position"].append(a["position"])
-            cols["bin_index"].append(int(distance_bin(float(a["position"][0]), (near, far))))
+            cols["bin_index"].append(int(distance_bin(float(a["position"][0]), float(a["position"][1]), (near, far))))
     if dirs and n_skipped == len(dirs):
         raise SceneError(f"{Path(split_dir) / 'clips'}: no usable clip; first problem: {problems[0]}")
     for p in problems:
