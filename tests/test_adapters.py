@@ -333,3 +333,24 @@ def test_tusimple_split_in_canonical_clip_shape(tmp_path):
     with pytest.raises(AdapterError, match="vehicle 0 has no velocity"):
         adapt_clips(source, "test", tmp_path / "out2" / "test")
     assert not (tmp_path / "out2" / "test").exists()
+
+
+def test_truncated_velodyne_sweep_fails_at_adaptation_naming_the_source(tmp_path):
+    drive = kitti_raw_fixture(tmp_path / "raw", n_frames=3)
+    src = drive / "velodyne_points" / "data" / "0000000001.bin"
+    src.write_bytes(src.read_bytes()[:-6])                   # not a multiple of the 16-byte record
+    out = tmp_path / "kr" / "train_2011_09_26_drive_0001_sync"
+    with pytest.raises(AdapterError, match=r"velodyne_points/data/0000000001\.bin: velodyne sweep of \d+ bytes"):
+        adapt_scene("kr", raw_spec(tmp_path / "raw"), out.name, out)
+    assert not out.exists()
+
+
+def test_images_vanished_after_listing_raise_adapter_error(tmp_path):
+    drive = kitti_raw_fixture(tmp_path / "raw", n_frames=3)
+    spec = raw_spec(tmp_path / "raw")
+    ids = scene_ids("kr", spec)                              # the listing is cached for the process
+    for p in (drive / "image_02" / "data").glob("*.png"):
+        p.unlink()
+    out = tmp_path / "kr" / ids[0]
+    with pytest.raises(AdapterError, match=r"image_02/data: scene .* the folder now has 0 images"):
+        adapt_scene("kr", spec, ids[0], out)

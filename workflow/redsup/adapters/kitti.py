@@ -28,7 +28,7 @@ from redsup.adapters.common import (AdapterError, SceneWriter, expect_size, imag
 from redsup.adapters.frames2d import Frames2D
 from redsup.det3d import eval_frame
 from redsup.prep.boxes3d import points_in_box
-from redsup.sceneio import BOX_COLUMNS, frame_name, read_lidar
+from redsup.sceneio import BOX_COLUMNS, LIDAR_RECORD_BYTES, frame_name, read_lidar
 
 FPS = 10.0
 RAW_CAMERAS = {"cam_front": "02", "cam_front_right": "03"}
@@ -264,6 +264,17 @@ def _check_frames(folder: Path, stems: list[str], ext: str, what: str) -> list[P
     return paths
 
 
+def _check_sweeps(paths: list[Path]) -> None:
+    """Velodyne records are linked, not read: check each source file's size here (x, y, z, reflectance
+    float32 records), so a truncated sweep fails at adaptation naming the source, not the link."""
+    for p in paths:
+        size = p.stat().st_size
+        if size == 0 or size % LIDAR_RECORD_BYTES:
+            raise AdapterError(f"{p}: velodyne sweep of {size} bytes is not a non-empty multiple of the "
+                               f"{LIDAR_RECORD_BYTES}-byte record (x, y, z, reflectance float32): truncated or "
+                               f"wrong format")
+
+
 def _base_meta(scene: str, dataset: str, kind: str, split: str, n: int, cameras: list[str], seed: int) -> dict:
     return {"scene": scene, "dataset": dataset, "domain": kind, "split": split, "fps": FPS, "n_frames": n,
             "cameras": cameras, "lidars": ["lidar_top"], "seed": int(seed)}
@@ -293,9 +304,14 @@ def adapt_raw(dataset: str, spec: dict, scene: str, out_dir: str | Path, seed: i
     all_frames = list_frames(drive_dir / "image_02" / "data", (".png",))
     stems = [p.stem for p in all_frames[entry["start"]:entry["start"] + entry["count"]]]
     n = len(stems)
+    if n < entry["count"]:
+        raise AdapterError(f"{drive_dir / 'image_02' / 'data'}: scene {scene} needs frames {entry['start']}.."
+                           f"{entry['start'] + entry['count'] - 1}, the folder now has {len(all_frames)} images "
+                           f"(files removed after the scenes were listed?)")
     images = {c: _check_frames(drive_dir / f"image_{RAW_CAMERAS[c]}" / "data", stems, ".png", "images")
               for c in cameras}
     sweeps = _check_frames(drive_dir / "velodyne_points" / "data", stems, ".bin", "velodyne sweeps")
+    _check_sweeps(sweeps)
     oxts_dir = drive_dir / "oxts" / "data"
     if oxts_dir.is_dir():
         T_world_imu = oxts_poses(_check_frames(oxts_dir, stems, ".txt", "OXTS packets"))
@@ -353,6 +369,9 @@ def adapt_object(dataset: str, spec: dict, scene: str, out_dir: str | Path, seed
     Ks, extrinsics, T_vehicle_rect0 = rig(projections, expect_size(calib_path, "R0_rect", calib["R0_rect"], 9),
                                           T_cam0_velo, T_velo_imu, float(spec.get("imu_height", 0.93)))
     sweep = root / "velodyne" / f"{fid}.bin"
+    if not sweep.is_file():
+        raise AdapterError(f"{sweep}: velodyne sweep missing")
+    _check_sweeps([sweep])
     points = read_lidar(sweep)
     T_eval_vehicle = eval_frame.eval_transform(T_vehicle_rect0)
     points_eval = geometry.transform_points(T_eval_vehicle @ extrinsics["lidar_top"], points[:, :3].astype(np.float64))
