@@ -5,6 +5,18 @@ Per frame: valid pixels are min_depth < gt < max_depth inside the Garg crop; the
 median(gt) / median(pred) (monocular models), then clamped to [min_depth, max_depth]; the seven metrics are
 computed on the valid pixels. Datasets average the per-frame metrics (``aggregate``). A frame that cannot be
 evaluated is returned as ``FrameEval(None, reason)`` and counted by ``aggregate``, never turned into NaN.
+
+Named protocols (``protocol=`` of `valid_mask` / `evaluate_frame`, `PROTOCOLS`; they replace min/max depth
+and crop):
+
+- ``eigen``: Monodepth2's ``eigen`` split: 1e-3 < gt < 80 m inside the Garg crop, prediction clamped to
+  [1e-3, 80] m.
+- ``eigen_benchmark``: Monodepth2's ``eigen_benchmark`` split (improved ground truth): every ``gt > 0``
+  pixel, no crop, no range cap on the ground truth (the prediction is still clamped to [1e-3, 80] m, as
+  Monodepth2's ``evaluate_depth.py`` does for every split).
+- ``ddad``, ``lyft``: Galteland (2021): 0.1 < gt < 80 m, no crop, prediction clamped to [0.1, 80] m.
+
+Without a protocol the explicit ``min_depth`` / ``max_depth`` / ``crop`` apply (range on gt and clamp).
 """
 from __future__ import annotations
 
@@ -15,6 +27,28 @@ import numpy as np
 
 GARG_CROP = (0.40810811, 0.99189189, 0.03594771, 0.96405229)  # rows top/bottom, cols left/right (fractions)
 METRICS = ("abs_rel", "sq_rel", "rmse", "rmse_log", "a1", "a2", "a3")
+
+
+class Protocol(NamedTuple):
+    min_depth: float     # prediction clamp (and gt range when cap_gt)
+    max_depth: float
+    crop: str | None
+    cap_gt: bool         # False: every gt > 0 pixel is valid (eigen_benchmark)
+
+
+PROTOCOLS = {
+    "eigen": Protocol(1e-3, 80.0, "garg", True),
+    "eigen_benchmark": Protocol(1e-3, 80.0, None, False),
+    "ddad": Protocol(0.1, 80.0, None, True),
+    "lyft": Protocol(0.1, 80.0, None, True),
+}
+
+
+def protocol(name: str) -> Protocol:
+    try:
+        return PROTOCOLS[name]
+    except KeyError:
+        raise ValueError(f"unknown depth evaluation protocol {name!r}; expected one of {sorted(PROTOCOLS)}") from None
 
 
 class FrameEval(NamedTuple):
@@ -46,11 +80,16 @@ def compute_depth_metrics(gt: np.ndarray, pred: np.ndarray) -> dict[str, float]:
     }
 
 
-def valid_mask(gt_depth: np.ndarray, *, min_depth: float = 1e-3, max_depth: float = 80.0, crop: str | None = "garg"
-               ) -> np.ndarray:
-    """GT pixels used for evaluation: finite, inside (min_depth, max_depth), inside the crop."""
+def valid_mask(gt_depth: np.ndarray, *, min_depth: float = 1e-3, max_depth: float = 80.0, crop: str | None = "garg",
+               protocol_name: str | None = None) -> np.ndarray:
+    """GT pixels used for evaluation: finite, inside (min_depth, max_depth), inside the crop; with a named
+    protocol its own rule (`PROTOCOLS`)."""
     gt = np.asarray(gt_depth)
-    mask = np.isfinite(gt) & (gt > min_depth) & (gt < max_depth)
+    cap = True
+    if protocol_name is not None:
+        min_depth, max_depth, crop, cap = protocol(protocol_name)
+    with np.errstate(invalid="ignore"):
+        mask = np.isfinite(gt) & ((gt > min_depth) & (gt < max_depth) if cap else gt > 0)
     if crop == "garg":
         mask &= garg_crop_mask(*gt.shape)
     elif crop is not None:
@@ -64,8 +103,8 @@ def median_scale(gt_depth: np.ndarray, pred_depth: np.ndarray, mask: np.ndarray)
 
 
 def evaluate_frame(gt_depth: np.ndarray, pred_depth: np.ndarray, *, min_depth: float = 1e-3, max_depth: float = 80.0,
-                   median_scaling: bool = True, fixed_scale: float | None = None, crop: str | None = "garg"
-                   ) -> FrameEval:
+                   median_scaling: bool = True, fixed_scale: float | None = None, crop: str | None = "garg",
+                   protocol_name: str | None = None) -> FrameEval:
     """Metrics of one frame, or ``FrameEval(None, reason)``. ``pred_depth`` must already be at GT resolution.
 
     The returned dict holds the seven metrics, ``scale`` (total factor applied to the prediction),
@@ -75,10 +114,13 @@ def evaluate_frame(gt_depth: np.ndarray, pred_depth: np.ndarray, *, min_depth: f
     pred = np.asarray(pred_depth, dtype=np.float64)
     if gt.shape != pred.shape:
         raise ValueError(f"prediction {pred.shape} and ground truth {gt.shape} differ; resize the prediction first")
-    mask = valid_mask(gt, min_depth=min_depth, max_depth=max_depth, crop=crop)
+    if protocol_name is not None:
+        min_depth, max_depth, crop, _ = protocol(protocol_name)
+    mask = valid_mask(gt, min_depth=min_depth, max_depth=max_depth, crop=crop, protocol_name=protocol_name)
     if not mask.any():
         return FrameEval(None, f"no valid ground-truth pixel in ({min_depth}, {max_depth}) m"
-                               + (" inside the Garg crop" if crop else ""))
+                               + (" inside the Garg crop" if crop else "")
+                               + (f" (protocol {protocol_name})" if protocol_name else ""))
     gt_v, pred_v = gt[mask], pred[mask]
     if not np.all(np.isfinite(pred_v)):
         return FrameEval(None, f"{int(np.sum(~np.isfinite(pred_v)))} non-finite predicted depths")

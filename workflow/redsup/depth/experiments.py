@@ -47,7 +47,8 @@ def evaluate_depth(gt: np.ndarray, pred: np.ndarray, eval_cfg: Mapping, metric_s
     fixed = None if metric_scale is False else (1.0 if metric_scale is True else float(metric_scale))
     return evaluation.evaluate_frame(gt, resize_depth(pred, gt.shape), min_depth=eval_cfg["min_depth"],
                                      max_depth=eval_cfg["max_depth"], median_scaling=fixed is None,
-                                     fixed_scale=fixed, crop=eval_cfg["crop"])
+                                     fixed_scale=fixed, crop=eval_cfg["crop"],
+                                     protocol_name=eval_cfg.get("protocol"))
 
 
 @dataclass
