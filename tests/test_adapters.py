@@ -6,6 +6,7 @@ import cv2
 import numpy as np
 import pytest
 
+
 from pathlib import Path
 
 from redsup import config, sceneio
@@ -13,6 +14,7 @@ from redsup.adapters import AdapterError, adapt_scene, cameras, rle, scene_ids
 from redsup.adapters.scene_folder import focal_from_lens
 from redsup.adapters.tusimple import adapt_clips, read_calibration
 from redsup.prep.depthmap import lidar_depth_maps
+from redsup.prep.detections import detect_scene
 
 CONFIG = Path(__file__).resolve().parents[1] / "config.yaml"
 NO_CROP = {"top": 0, "bottom": 0, "left": 0, "right": 0}
@@ -247,9 +249,19 @@ def test_coco_detections_become_instances(tmp_path):
     out = tmp_path / "ko" / "train_000007"
     summary = adapt_scene("ko", spec, "train_000007", out)
     inst = sceneio.read_label_png(out / "gt" / "instance" / "cam_front" / "000000.png")
-    # the car detection takes the label's id 1; the unmatched one is dropped (labelled data)
-    assert np.array_equal(inst == 1, mask) and set(np.unique(inst)) == {0, 1}
-    assert summary["detections_kept"] == 1 and summary["detections_dropped_unmatched"] == 1
+    # the car detection takes the label's id 1; the unmatched one (a false positive) is kept with a new id
+    records = json.loads((out / "gt" / "detections" / "cam_front" / "000000.json").read_text())
+    fp_id = records[1]["track_id"]                           # first id after the frame's labels
+    assert records == [{"track_id": 1, "score": 0.9, "cls": "car"}, {"track_id": fp_id, "score": 0.8, "cls": "car"}]
+    assert np.array_equal(inst == 1, mask) and np.array_equal(inst == fp_id, other) and fp_id > 1
+    assert summary["detections_kept"] == 2 and summary["detections_unmatched"] == 1
+    # preparation: the supplied detections enter as they are (no stand-in noise), the false positive with its score
+    cfg = config.load(CONFIG)["detection"]
+    level = next(iter(cfg["levels"]))
+    arrays, _ = detect_scene(out, {**cfg, "score_threshold": 0.85}, level, seed=0)
+    assert sorted(arrays["score"].tolist()) == pytest.approx([0.8, 0.9])
+    fp = int(np.argmin(arrays["score"]))
+    assert arrays["matched_track"][fp] == -1 and arrays["matched_track"][1 - fp] == 1
     bad = [{"category_id": 3, "score": 0.9, "segmentation": {"size": [H + 1, W], "counts": [H * W + W]}}]
     det_file.write_text(json.dumps(bad))
     with pytest.raises(AdapterError, match=r"000007.json: entry 0: mask size \[21, 40\]"):

@@ -35,7 +35,7 @@ class Frames2D:
         self.inst = instance_settings(spec)
         self.road = (spec.get("road") or {}).get("path")
         self.root = Path(dataset_root)
-        self.stats = {"detections_kept": 0, "detections_dropped_unmatched": 0, "semantic_frames": 0}
+        self.stats = {"detections_kept": 0, "detections_unmatched": 0, "semantic_frames": 0}
 
     def write(self, writer: SceneWriter, camera: str, frame: int, image_path: Path, size: tuple[int, int],
               labels: list[dict] | None, labelled: bool) -> list[dict]:
@@ -48,11 +48,12 @@ class Frames2D:
         if source == "detections":
             dets = masks.load_detections(mirrored(self.inst["path"], relative, ".json"), size,
                                          self.inst["categories"], self.inst["min_score"])
-            instance, added, dropped = masks.instances_from_detections(
+            instance, added, unmatched, records = masks.instances_from_detections(
                 dets, size, labels if labelled else None, self.inst["match_iou"],
                 first_id=1 + max([int(r["track_id"]) for r in (labels or [])] + [0]))
-            self.stats["detections_kept"] += len(dets) - dropped
-            self.stats["detections_dropped_unmatched"] += dropped
+            self.stats["detections_kept"] += len(dets)
+            self.stats["detections_unmatched"] += unmatched
+            writer.write_json(f"gt/detections/{camera}/{frame_name(frame, 'json')}", records)
             for r in added:
                 row = empty_box_row(frame, r["track_id"], r["cls"])
                 row.update({k: r[k] for k in ("x1", "y1", "x2", "y2")})
@@ -78,4 +79,5 @@ class Frames2D:
         return new_rows
 
     def meta(self) -> dict:
-        return {"instances": self.inst["source"], "semantic": "png" if self.road else "none"}
+        return {"instances": self.inst["source"], "semantic": "png" if self.road else "none",
+                "detections_supplied": self.inst["source"] == "detections"}

@@ -86,13 +86,16 @@ def box_iou(a, b) -> float:
 
 
 def instances_from_detections(detections: list[dict], size: tuple[int, int], labels: list[dict] | None,
-                              match_iou: float, first_id: int = 1) -> tuple[np.ndarray, list[dict], int]:
-    """(instance image uint16, new boxes.csv rows, number of detections dropped).
+                              match_iou: float, first_id: int = 1
+                              ) -> tuple[np.ndarray, list[dict], int, list[dict]]:
+    """(instance image uint16, new boxes.csv rows, number of unmatched detections, detection records).
 
     With `labels` (boxes.csv rows of a labelled frame), each detection takes the id of the unmatched
     label of the same class (case-insensitive) whose 2D box overlaps its mask box most (IoU >= match_iou,
-    greedy in score order); detections matching no label are dropped. Without labels every detection
-    gets a new id (from `first_id`) and a new row with its class and mask box (3D fields unknown).
+    greedy in score order). A detection matching no label (a false positive) is kept with a new id
+    (from `first_id`) but adds no row (it is no ground truth). Without labels every detection gets a new id
+    and a new row with its class and mask box (3D fields unknown). No detection is dropped: filtering by the labels would put ground truth into the
+    detections. The records [{track_id, score, cls}] keep every detection's own score.
     Masks are painted lowest score first, so the better detection owns overlapping pixels.
     """
     width, height = size
@@ -112,19 +115,20 @@ def instances_from_detections(detections: list[dict], size: tuple[int, int], lab
                 iou = box_iou(box, (row["x1"], row["y1"], row["x2"], row["y2"]))
                 if iou >= best_iou:
                     best, best_iou = row, iou
-            if best is None:
-                dropped += 1
+            if best is not None:
+                used.add(int(best["track_id"]))
+                assigned.append((int(best["track_id"]), det))
                 continue
-            used.add(int(best["track_id"]))
-            assigned.append((int(best["track_id"]), det))
-        else:
-            assigned.append((next_id, det))
+            dropped += 1                   # unmatched: kept below as a new instance
+        assigned.append((next_id, det))
+        if labels is None:                 # labelled frames: a false positive is no ground-truth row
             new_rows.append({"track_id": next_id, "cls": det["cls"], "x1": box[0], "y1": box[1],
                              "x2": box[2], "y2": box[3]})
-            next_id += 1
+        next_id += 1
     for track, det in sorted(assigned, key=lambda a: a[1]["score"]):
         instance[det["mask"]] = track
-    return instance, new_rows, dropped
+    records = [{"track_id": int(t), "score": float(d["score"]), "cls": d["cls"]} for t, d in assigned]
+    return instance, new_rows, dropped, records
 
 
 def instances_from_boxes(labels: list[dict], size: tuple[int, int]) -> np.ndarray:

@@ -12,6 +12,8 @@ Read them with `redsup.prep.masks_io` (load_detections, mask_of, points_of, ...)
 """
 from __future__ import annotations
 
+import json
+
 from pathlib import Path
 
 import numpy as np
@@ -21,7 +23,8 @@ from redsup import geometry, sceneio
 from redsup.fileio import save_npz_atomic
 from redsup.prep import masks_io
 from redsup.prep.boxes3d import projected_box_area
-from redsup.prep.detector import KIND_FALSE_POSITIVE, KIND_MERGED, SILHOUETTE_FILL, match_to_gt, simulate_frame
+from redsup.prep.detector import (KIND_FALSE_POSITIVE, KIND_MERGED, KIND_SINGLE, SILHOUETTE_FILL, match_to_gt,
+                                  simulate_frame)
 from redsup.prep.points import FramePoints, gt_inlier_flags, mask_pixel_box, pixel_box_to_xyxy, read_sweep
 
 LIDAR = "lidar_top"
@@ -101,6 +104,23 @@ def _label(ctx: SceneContext, kind: str, camera: str, frame: int, required: bool
     return image
 
 
+def supplied_frame(scene_dir: Path, camera: str, frame: int, instance: np.ndarray) -> list[dict]:
+    """Detections a user supplied for a real frame (written by the adapter: gt/detections/<camera>/<frame>.json,
+    one {track_id, score, cls} per detection, masks = its pixels of the instance image), unmatched ones
+    (false positives) included; kind: single, or false positive when it took no label's id."""
+    path = Path(scene_dir) / "gt" / "detections" / camera / sceneio.frame_name(frame, "json")
+    try:
+        records = json.loads(path.read_text())
+    except FileNotFoundError as exc:
+        raise sceneio.SceneError(f"{path}: supplied detections missing (scene.json says detections_supplied)") from exc
+    out = []
+    for r in records:
+        mask = instance == int(r["track_id"])
+        if mask.any():                     # a detection fully covered by a better one has no pixel left
+            out.append({"mask": mask, "score": float(r["score"]), "kind": KIND_SINGLE})
+    return out
+
+
 def detect_scene(scene_dir: str | Path, detection_cfg: dict, level: str, seed: int) -> tuple[dict, dict]:
     """(arrays of detections_{level}.npz, summary numbers) for one scene."""
     camera, points_cfg = detection_cfg["camera"], detection_cfg["points"]
@@ -113,15 +133,19 @@ def detect_scene(scene_dir: str | Path, detection_cfg: dict, level: str, seed: i
     totals = {"gt": 0, "missed": 0, "eroded_away": 0, "merged_groups": 0, "false_positive": 0,
               "below_threshold": 0, "gt_found": 0}
     nonfinite = np.zeros(ctx.n_frames, dtype=np.int32)
+    supplied = bool(sceneio.read_meta(ctx.dir).get("detections_supplied", False))
     for i in tqdm(range(ctx.n_frames), desc=f"{ctx.dir.name} detections {level}", mininterval=5):
         instance = _label(ctx, "instance", camera, i, required=True)
         semantic = _label(ctx, "semantic", camera, i, required=False)
         objects = ctx.objects(i, instance)
-        rng = np.random.default_rng(np.random.SeedSequence([int(seed), i]))
-        dets, counts = simulate_frame(instance, semantic, objects, settings, rng, scale)
+        if supplied:                       # real data: the user's detections as they are, scores included
+            dets, counts = supplied_frame(ctx.dir, camera, i, instance), {}
+        else:                              # embedded world: the stand-in detector's noise model
+            rng = np.random.default_rng(np.random.SeedSequence([int(seed), i]))
+            dets, counts = simulate_frame(instance, semantic, objects, settings, rng, scale)
         for key, value in counts.items():
             totals[key] += value
-        keep = [d for d in dets if d["score"] >= detection_cfg["score_threshold"]]
+        keep = dets if supplied else [d for d in dets if d["score"] >= detection_cfg["score_threshold"]]
         totals["below_threshold"] += len(dets) - len(keep)
         keep.sort(key=lambda d: -d["score"])
         sweep, nonfinite[i] = read_sweep(sweeps[i])
