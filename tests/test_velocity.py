@@ -324,3 +324,38 @@ def test_table_frames_use_the_paper_labels():
     assert t2.at["Ours (MLP-tracker)", "E_v^far"] == 1.5 and math.isnan(t2.at["Ours (MLP-tracker)", "E_p"])
     ab = ablation_table({"x": m})
     assert ab.at["x", "E_v (abnormal)"] == 9.0 and ab.at["x", "E_v^far (abnormal)"] == 12.0
+
+
+def test_seed_runs_and_seed_rows(tmp_path):
+    """MLP configurations run once per seed and their row is the seed mean with the seed spread; rows
+    without learning get a paired bootstrap over the test vehicles."""
+    from redsup.velocity import plan, report
+
+    config = {"profile": "tiny", "velocity": {
+        "seeds": 3, "configurations": [{"name": "geometric", "label": "geometric reprojection", "method": "geometric"},
+                                       {"name": "mlp_tracker", "label": "Ours (MLP-tracker)", "method": "mlp",
+                                        "train_on": "tracker"}],
+        "tables": {"t2": {"layout": "errors", "rows": ["geometric", "mlp_tracker"]}}}}
+    assert plan.seed_runs(config, "mlp_tracker") == ["mlp_tracker", "mlp_tracker_seed1", "mlp_tracker_seed2"]
+    assert plan.seed_runs(config, "geometric") == ["geometric"]
+    assert plan.parse_run("mlp_tracker_seed2") == ("mlp_tracker", 2)
+    rows = plan.rows(config)["t2"]
+    assert [r[1] for r in rows] == ["geometric", "mlp_tracker", "mlp_tracker_seed1", "mlp_tracker_seed2"]
+    assert plan.runs(config)["mlp_tracker_seed1"]["tables"] == ["t2"]
+
+    def record(e_v, sq_err):
+        ids = [f"0/{i}" for i in range(len(sq_err))]
+        return {"metrics": {"test_E_v": e_v, "forward_ms_median": 0.1},
+                "per_track": {"test": {"id": ids, "bin": [0, 1, 2, 2], "sq_err": sq_err}}}
+
+    results = {"geometric": record(4.0, [1.0, 3.0, 7.0, 9.0]), "mlp_tracker": record(1.0, [1] * 4),
+               "mlp_tracker_seed1": record(2.0, [2] * 4), "mlp_tracker_seed2": record(3.0, [3] * 4)}
+    ours, noise = report.configuration_table("errors", rows, results)
+    assert ours.at["Ours (MLP-tracker)", "E_v"] == pytest.approx(2.0)
+    assert noise["Ours (MLP-tracker)"]["E_v"] == {"kind": "seeds", "values": [1.0, 2.0, 3.0]}
+    geo = noise["geometric reprojection"]["E_v^far"]
+    assert geo["kind"] == "bootstrap" and set(np.round(geo["values"], 6)) <= {7.0, 8.0, 9.0}
+    # E_v of the full sample by hand: bins near 1, medium 3, far (7 + 9) / 2 = 8 -> mean 4
+    assert report._binned({f"0/{i}": v for i, v in enumerate([1.0, 3.0, 7.0, 9.0])},
+                          {f"0/{i}": b for i, b in enumerate([0, 1, 2, 2])}, [f"0/{i}" for i in range(4)],
+                          None) == pytest.approx(4.0)

@@ -87,15 +87,6 @@ TABLE_IDS = table_contract.table_ids()
 FIGURE_IDS = table_contract.table_ids("figure") + ["world_frame_overview"]
 # table id -> [(row label, run, step)] from every stage's plan (redsup.tables.contract); rule table's inputs
 TABLE_ROWS = table_contract.all_rows(config, scenes_of)
-# TRANSITION (while stages move to the contract): the tables whose stage plan has table_frame
-def _on_contract(table):
-    try:
-        return hasattr(table_contract.plan_of(table), "table_frame")
-    except ModuleNotFoundError:
-        return False
-
-
-CONTRACT_TABLE_IDS = [t for t in TABLE_IDS if _on_contract(t)]
 
 
 def get_table_inputs(wildcards):

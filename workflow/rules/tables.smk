@@ -19,7 +19,7 @@ rule table:
     params:
         rows=lambda wildcards: [list(r) for r in TABLE_ROWS.get(wildcards.table, [])],
     wildcard_constraints:
-        table="|".join(CONTRACT_TABLE_IDS) or "(?!)",
+        table="|".join(TABLE_IDS),
     threads: 1
     resources:
         mem_mb=1000,
@@ -45,27 +45,6 @@ rule data_summary:
         ENV
     script:
         "../scripts/data_summary.py"
-
-
-rule mccraith_ch3_table1:
-    input:
-        clips=expand("results/raw/clips/{split}", split=("train", "test")),
-    output:
-        md="results/tables/mccraith_ch3_table1.md",
-        csv="results/tables/mccraith_ch3_table1.csv",
-        tex="results/tables/mccraith_ch3_table1.tex",
-        score="results/tables/mccraith_ch3_table1.score.json",
-    log:
-        "results/logs/tables/mccraith_ch3_table1.log",
-        run="results/runs/tables/mccraith_ch3_table1.json",
-    threads: 1
-    resources:
-        mem_mb=1000,
-        runtime=10,
-    conda:
-        ENV
-    script:
-        "../scripts/ch3_table1.py"
 
 
 rule world_frame_overview:

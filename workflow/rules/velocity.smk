@@ -1,18 +1,21 @@
 # Velocity from tracked boxes and synthetic box tracks (McCraith ch. 3).
+#
+# velocity_fit_generator  results/velocity/generator_statistics.json    the §IV-B generator, fitted on train
+# velocity_baseline       results/velocity/{run}/metrics.json           geometric / constant (no learning)
+# velocity_mlp            results/velocity/{run}/{metrics.json,model.pt} one MLP configuration and seed
+# velocity_clip_counts    results/velocity/clip_counts.json             Table I's counts
+# velocity_figure         results/figures/{figure}.png + results/velocity/figures/{figure}.json (its numbers)
+# The configurations and tables are data (config `velocity.configurations`, `velocity.tables.<table id>`),
+# planned by redsup.velocity.plan; rule table builds every table.
+import re
 
-# the configurations (config velocity.configurations) as data: one job and one child run each
-VELOCITY_CONFIGS = {c["name"]: c for c in config["velocity"]["configurations"]}
-VELOCITY_BASELINES = [n for n, c in VELOCITY_CONFIGS.items() if c["method"] in ("geometric", "constant")]
-VELOCITY_MLP = [n for n, c in VELOCITY_CONFIGS.items() if c["method"] == "mlp"]
+import redsup.velocity.plan as velocity_plan
+
+VELOCITY_RUNS = velocity_plan.runs(config)
+VELOCITY_BASELINES = [r for r, s in VELOCITY_RUNS.items() if s.get("method") in ("geometric", "constant")]
+VELOCITY_MLP = [r for r, s in VELOCITY_RUNS.items() if s.get("method") == "mlp"]
 VELOCITY_EVAL_SPLITS = [s for s in ("test", "abnormal") if s in CLIP_SPLIT_NAMES]
-
-
-# metrics of the configurations whose parent run is Table II, and of all of them (the ablation table)
-VELOCITY_TABLE2_METRICS = expand(
-    "results/velocity/{config}/metrics.json",
-    config=[n for n, c in VELOCITY_CONFIGS.items() if c["table"] == "mccraith_ch3_table2"],
-)
-VELOCITY_ALL_METRICS = expand("results/velocity/{config}/metrics.json", config=list(VELOCITY_CONFIGS))
+VELOCITY_FIGURES = [t for s in VELOCITY_RUNS.values() if "figure" in s for t in s["tables"]]
 
 
 rule velocity_fit_generator:
@@ -22,8 +25,8 @@ rule velocity_fit_generator:
     output:
         "results/velocity/generator_statistics.json",
     log:
-        "results/logs/velocity/fit_generator.log",
-        run="results/runs/velocity/fit_generator.json",
+        "results/logs/velocity/generator_statistics.log",
+        run="results/runs/velocity/generator_statistics.json",
     threads: 1
     resources:
         mem_mb=1000,
@@ -41,13 +44,15 @@ rule velocity_baseline:
         train_tracks="results/prepared/clips/train/medianflow.npz",
         train_clips="results/raw/clips/train",
     output:
-        metrics="results/velocity/{config}/metrics.json",
-        predictions="results/velocity/{config}/predictions.npz",
+        metrics="results/velocity/{run}/metrics.json",
+        predictions="results/velocity/{run}/predictions.npz",
     log:
-        "results/logs/velocity/{config}.log",
-        run="results/runs/velocity/{config}.json",
+        "results/logs/velocity/{run}/metrics.log",
+        run="results/runs/velocity/{run}/metrics.json",
+    params:
+        run=lambda wc: VELOCITY_RUNS[wc.run],
     wildcard_constraints:
-        config="|".join(VELOCITY_BASELINES),
+        run="|".join(re.escape(r) for r in VELOCITY_BASELINES) or "(?!)",
     threads: 1
     resources:
         mem_mb=1000,
@@ -67,18 +72,21 @@ rule velocity_mlp:
         # the fitted generator, for configurations trained on synthetic tracks
         generator=lambda wc: (
             ["results/velocity/generator_statistics.json"]
-            if VELOCITY_CONFIGS[wc.config].get("train_on") == "synthetic"
+            if velocity_plan.configurations(config)[VELOCITY_RUNS[wc.run]["configuration"]].get("train_on")
+            == "synthetic"
             else []
         ),
     output:
-        metrics="results/velocity/{config}/metrics.json",
-        predictions="results/velocity/{config}/predictions.npz",
-        model="results/velocity/{config}/model.pt",
+        metrics="results/velocity/{run}/metrics.json",
+        predictions="results/velocity/{run}/predictions.npz",
+        model="results/velocity/{run}/model.pt",
     log:
-        "results/logs/velocity/{config}.log",
-        run="results/runs/velocity/{config}.json",
+        "results/logs/velocity/{run}/metrics.log",
+        run="results/runs/velocity/{run}/metrics.json",
+    params:
+        run=lambda wc: VELOCITY_RUNS[wc.run],
     wildcard_constraints:
-        config="|".join(VELOCITY_MLP),
+        run="|".join(re.escape(r) for r in VELOCITY_MLP) or "(?!)",
     threads: 1
     resources:
         mem_mb=2000,
@@ -89,17 +97,14 @@ rule velocity_mlp:
         "../scripts/velocity_mlp.py"
 
 
-rule mccraith_ch3_table2:
+rule velocity_clip_counts:
     input:
-        metrics=VELOCITY_TABLE2_METRICS,
+        clips=lambda wc: expand("results/raw/clips/{split}", split=VELOCITY_RUNS["clip_counts"]["splits"]),
     output:
-        md="results/tables/mccraith_ch3_table2.md",
-        csv="results/tables/mccraith_ch3_table2.csv",
-        tex="results/tables/mccraith_ch3_table2.tex",
-        score="results/tables/mccraith_ch3_table2.score.json",
+        "results/velocity/clip_counts.json",
     log:
-        "results/logs/tables/mccraith_ch3_table2.log",
-        run="results/runs/tables/mccraith_ch3_table2.json",
+        "results/logs/velocity/clip_counts.log",
+        run="results/runs/velocity/clip_counts.json",
     threads: 1
     resources:
         mem_mb=1000,
@@ -107,44 +112,22 @@ rule mccraith_ch3_table2:
     conda:
         ENV
     script:
-        "../scripts/velocity_table.py"
+        "../scripts/velocity_clip_counts.py"
 
 
-rule mccraith_ch3_synthetic_ablation:
-    input:
-        metrics=VELOCITY_ALL_METRICS,
-    output:
-        md="results/tables/mccraith_ch3_synthetic_ablation.md",
-        csv="results/tables/mccraith_ch3_synthetic_ablation.csv",
-        tex="results/tables/mccraith_ch3_synthetic_ablation.tex",
-        score="results/tables/mccraith_ch3_synthetic_ablation.score.json",
-    log:
-        "results/logs/tables/mccraith_ch3_synthetic_ablation.log",
-        run="results/runs/tables/mccraith_ch3_synthetic_ablation.json",
-    threads: 1
-    resources:
-        mem_mb=1000,
-        runtime=10,
-    conda:
-        ENV
-    script:
-        "../scripts/velocity_table.py"
-
-
-rule mccraith_ch3_fig3:
+rule velocity_figure:
     input:
         tracks="results/prepared/clips/train/medianflow.npz",
         clips="results/raw/clips/train",
         generator="results/velocity/generator_statistics.json",
     output:
-        png="results/figures/mccraith_ch3_fig3.png",
-        md="results/tables/mccraith_ch3_fig3.md",
-        csv="results/tables/mccraith_ch3_fig3.csv",
-        tex="results/tables/mccraith_ch3_fig3.tex",
-        score="results/tables/mccraith_ch3_fig3.score.json",
+        png="results/figures/{figure}.png",
+        numbers="results/velocity/figures/{figure}.json",
     log:
-        "results/logs/figures/mccraith_ch3_fig3.log",
-        run="results/runs/figures/mccraith_ch3_fig3.json",
+        "results/logs/velocity/figures/{figure}.log",
+        run="results/runs/velocity/figures/{figure}.json",
+    wildcard_constraints:
+        figure="|".join(VELOCITY_FIGURES) or "(?!)",
     threads: 1
     resources:
         mem_mb=1000,
@@ -152,28 +135,4 @@ rule mccraith_ch3_fig3:
     conda:
         ENV
     script:
-        "../scripts/velocity_fig3.py"
-
-
-rule mccraith_ch3_fig6:
-    input:
-        tracks="results/prepared/clips/train/medianflow.npz",
-        clips="results/raw/clips/train",
-        generator="results/velocity/generator_statistics.json",
-    output:
-        png="results/figures/mccraith_ch3_fig6.png",
-        md="results/tables/mccraith_ch3_fig6.md",
-        csv="results/tables/mccraith_ch3_fig6.csv",
-        tex="results/tables/mccraith_ch3_fig6.tex",
-        score="results/tables/mccraith_ch3_fig6.score.json",
-    log:
-        "results/logs/figures/mccraith_ch3_fig6.log",
-        run="results/runs/figures/mccraith_ch3_fig6.json",
-    threads: 1
-    resources:
-        mem_mb=1000,
-        runtime=10,
-    conda:
-        ENV
-    script:
-        "../scripts/velocity_fig6.py"
+        "../scripts/velocity_figure.py"

@@ -13,9 +13,19 @@ sm = snakemake  # noqa: F821
 table_id = sm.wildcards.table
 rows = [tuple(r) for r in sm.params.rows]
 plan = plan_of(table_id)
+
+
+def _rows_param(rows):
+    """{row label: [run or run@step, ...]} (a label has one run per training seed)."""
+    out = {}
+    for label, run, step in rows:
+        out.setdefault(label, []).append(run if step is None else f"{run}@{step}")
+    return out
+
+
 results = {run: read_json(plan.result_path(run)) for run in dict.fromkeys(run for _, run, _ in rows)}
 with child_run(sm.log.run, table_id, "table", rule=sm.rule, wildcards=dict(sm.wildcards), config=sm.config,
-               params={"rows": {label: f"{run}@{step}" for label, run, step in rows}}) as run:
+               params={"rows": _rows_param(rows)}) as run:
     frame = plan.table_frame(table_id, sm.config, rows, results)
     score = write_table(table_id, frame.ours, sm.output.md, sm.output.csv, sm.output.tex,
                         extra_claims=frame.extra_claims, note=frame.note, noise=frame.noise)

@@ -7,16 +7,17 @@ sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821
 from pathlib import Path  # noqa: E402
 
 from redsup.runlog import child_run  # noqa: E402
+from redsup.velocity import plan  # noqa: E402
 from redsup.velocity.data import load_split  # noqa: E402
 from redsup.velocity.experiment import run_constant, run_geometric  # noqa: E402
 from redsup.velocity.report import write_configuration_outputs  # noqa: E402
 
 sm = snakemake  # noqa: F821
 vcfg = sm.config["velocity"]
-configuration = next(c for c in vcfg["configurations"] if c["name"] == sm.wildcards.config)
-with child_run(sm.log.run, configuration["table"], configuration["label"], rule=sm.rule,
+configuration = plan.configurations(sm.config)[sm.params.run["configuration"]]
+with child_run(sm.log.run, plan.parent(sm.config, configuration["name"]), sm.wildcards.run, rule=sm.rule,
                wildcards=dict(sm.wildcards), config=sm.config,
-               params={"configuration": configuration, "geometric": vcfg["geometric"],
+               params={"configuration": configuration, "tables": sm.params.run["tables"], "geometric": vcfg["geometric"],
                        "min_box_px": vcfg["min_box_px"]}) as run:
     splits = {Path(c).name: load_split(t, c, vcfg["min_box_px"]) for t, c in zip(sm.input.tracks, sm.input.clips)}
     if configuration["method"] == "geometric":

@@ -11,6 +11,7 @@ import torch  # noqa: E402
 
 from redsup.prep.seeds import derive_seed  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
+from redsup.velocity import plan  # noqa: E402
 from redsup.velocity.data import load_split  # noqa: E402
 from redsup.velocity.experiment import run_mlp  # noqa: E402
 from redsup.velocity.mlp import resolve_device, save_model  # noqa: E402
@@ -19,12 +20,15 @@ from redsup.velocity.report import write_configuration_outputs  # noqa: E402
 sm = snakemake  # noqa: F821
 torch.set_num_threads(sm.threads)
 vcfg = sm.config["velocity"]
-configuration = next(c for c in vcfg["configurations"] if c["name"] == sm.wildcards.config)
-seed = derive_seed(sm.config["seed"], "velocity", configuration["name"])
+spec = sm.params.run
+configuration = plan.configurations(sm.config)[spec["configuration"]]
+seed = derive_seed(sm.config["seed"], "velocity", configuration["name"])  # seed index 0: as before seeds existed
+seed = seed if spec["seed_index"] == 0 else derive_seed(seed, "seed", str(spec["seed_index"]))
 device = resolve_device(vcfg["device"])
-params = {"configuration": configuration, "mlp": vcfg["mlp"], "smoothing_sigma": vcfg["smoothing_sigma"],
+params = {"configuration": configuration, "seed_index": spec["seed_index"], "tables": spec["tables"],
+          "mlp": vcfg["mlp"], "smoothing_sigma": vcfg["smoothing_sigma"],
           "synthetic": vcfg["synthetic"], "min_box_px": vcfg["min_box_px"], "seed": seed, "device": device}
-with child_run(sm.log.run, configuration["table"], configuration["label"], rule=sm.rule,
+with child_run(sm.log.run, plan.parent(sm.config, configuration["name"]), sm.wildcards.run, rule=sm.rule,
                wildcards=dict(sm.wildcards), config=sm.config, params=params) as run:
     train = load_split(sm.input.train_tracks, sm.input.train_clips, vcfg["min_box_px"])
     splits = {Path(c).name: load_split(t, c, vcfg["min_box_px"]) for t, c in zip(sm.input.tracks, sm.input.clips)}
@@ -37,8 +41,9 @@ with child_run(sm.log.run, configuration["table"], configuration["label"], rule=
     metrics, predictions, model, curve = run_mlp(configuration, vcfg["mlp"], vcfg["smoothing_sigma"],
                                                  vcfg["synthetic"]["samples"], train, splits, stats, seed,
                                                  on_epoch=on_epoch, device=device)
-    save_model(model, sm.output.model, {"configuration": configuration, "smoothing_sigma": vcfg["smoothing_sigma"],
-                                        "calibration": train.calib.as_dict()})
+    save_model(model, sm.output.model, sm.config, {"configuration": configuration, "seed": seed,
+                                                   "smoothing_sigma": vcfg["smoothing_sigma"],
+                                                   "calibration": train.calib.as_dict()})
     write_configuration_outputs(configuration, metrics, predictions, splits, sm.output.metrics, sm.output.predictions)
     run.log_metrics(metrics)
     print(metrics)

@@ -62,12 +62,6 @@ def all_rows(config, scenes_of, registry: dict | None = None) -> dict[str, list[
     reg = registry or load_registry()
     out: dict[str, list[tuple]] = {}
     for module in dict.fromkeys(reg["stage_modules"].values()):
-        try:
-            plan = importlib.import_module(module)
-        except ModuleNotFoundError:  # TRANSITION: a stage not yet on the contract
-            continue
-        if not hasattr(plan, "table_frame"):  # TRANSITION
-            continue
-        for table, rows in plan.rows(config, scenes_of).items():
+        for table, rows in importlib.import_module(module).rows(config, scenes_of).items():
             out[table] = [tuple(r) for r in rows]
     return out

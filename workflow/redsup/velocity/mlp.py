@@ -136,22 +136,23 @@ def predict(model: VelocityMLP, features: np.ndarray) -> np.ndarray:
         return model(x).cpu().numpy().astype(np.float64)
 
 
-def save_model(model: VelocityMLP, path, extra: dict | None = None) -> None:
-    """torch.save of the state and its construction arguments (to `path`.part, then renamed)."""
-    import os
+def save_model(model: VelocityMLP, path, config: dict | None = None, extra: dict | None = None) -> None:
+    """The one checkpoint format (redsup.checkpoint, kind "velocity_mlp"): the state, the construction
+    arguments and ``extra`` in meta, the resolved workflow ``config`` beside them (written atomically)."""
+    from redsup import checkpoint
 
-    tmp = f"{path}.part"
-    state = {k: v.cpu() for k, v in model.state_dict().items()}
-    torch.save({"config": model.config, "state_dict": state, **(extra or {})}, tmp)
-    os.replace(tmp, path)
+    checkpoint.save(path, "velocity_mlp", {"net": model}, config or {}, {"network": model.config, **(extra or {})})
 
 
 def load_model(path) -> tuple[VelocityMLP, dict]:
-    blob = torch.load(path, map_location="cpu", weights_only=False)
-    model = VelocityMLP(**blob["config"])
-    model.load_state_dict(blob["state_dict"])
+    """(model in eval mode, meta) of a checkpoint written by ``save_model``."""
+    from redsup import checkpoint
+
+    data = checkpoint.load(path, "velocity_mlp")
+    model = VelocityMLP(**data["meta"]["network"])
+    model.load_state_dict(data["state"]["net"])
     model.eval()
-    return model, blob
+    return model, data["meta"]
 
 
 def forward_time_ms(model: VelocityMLP, boxes: np.ndarray, calib: Calibration, sigma: float,

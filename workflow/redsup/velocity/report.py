@@ -7,9 +7,11 @@ import os
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 
 from redsup.fileio import save_npz_atomic, write_text_atomic
 from redsup.velocity.data import TrackSet
+from redsup.velocity.metrics import BIN_NAMES, squared_error
 
 
 def _plain(v):
@@ -22,7 +24,8 @@ def _plain(v):
 
 def write_configuration_outputs(configuration: dict, metrics: dict, predictions: dict[str, dict],
                                 splits: dict[str, TrackSet], metrics_path, predictions_path) -> None:
-    """`metrics.json` ({name, label, table, configuration, metrics, bad_input per split and clip}) and
+    """`metrics.json` ({name, label, configuration, metrics, per_track: {split: id, bin, sq_err of every
+    annotated vehicle}, bad_input per split and clip}) and
     `predictions.npz` (<split>_<array>: velocity_pred, velocity_true [vx, vz], bins, clip, track_id,
     tracker_failed, degenerate, and position_pred / position_true [x, z] when the method has positions)."""
     arrays = {}
@@ -36,42 +39,119 @@ def write_configuration_outputs(configuration: dict, metrics: dict, predictions:
             arrays[f"{split}_position_pred"] = pred["position"]
             arrays[f"{split}_position_true"] = tracks.position
     save_npz_atomic(predictions_path, **arrays)
-    record = {"name": configuration["name"], "label": configuration["label"], "table": configuration["table"],
+    per_track = {}
+    for split, tracks in splits.items():
+        err = squared_error(predictions[split]["velocity"], tracks.velocity)
+        per_track[split] = {"id": [f"{c}/{t}" for c, t in zip(tracks.clip, tracks.track_id)],
+                            "bin": [int(b) for b in tracks.bins], "sq_err": [_plain(e) for e in err]}
+    record = {"name": configuration["name"], "label": configuration["label"],
               "configuration": configuration, "metrics": {k: _plain(v) for k, v in metrics.items()},
+              "per_track": per_track,
               "bad_input": {split: {str(c): n for c, n in t.bad_input_per_clip().items()}
                             for split, t in splits.items()}}
     write_text_atomic(metrics_path, json.dumps(record, indent=1))
 
 
-def read_results(paths) -> dict[str, dict]:
-    """row label -> metrics, in the order given."""
+# ------------------------------------------------------------------------------- tables (contract)
+def error_columns(layout: str) -> dict[str, tuple[str, int | None]]:
+    """The E_v columns of a layout: column -> (split, bin index or None for the mean of the bins)."""
+    if layout == "errors":
+        return {"E_v": ("test", None), **{f"E_v^{b}": ("test", i) for i, b in enumerate(BIN_NAMES)}}
+    return {"E_v (test)": ("test", None), "E_v^far (test)": ("test", 2), "E_v (abnormal)": ("abnormal", None),
+            **{f"E_v^{b} (abnormal)": ("abnormal", i) for i, b in enumerate(BIN_NAMES)}}
+
+
+def _binned(sq_err: dict[str, float], bins: dict[str, int], units, which: int | None) -> float:
+    """E_v of a multiset of vehicles: the mean of one bin, or the mean of the non-empty bins' means."""
+    per_bin = {}
+    for u in units:
+        per_bin.setdefault(bins[u], []).append(sq_err[u])
+    if which is not None:
+        vals = per_bin.get(which)
+        return float(np.mean(vals)) if vals else math.nan
+    means = [np.mean(v) for v in per_bin.values()]
+    return float(np.mean(means)) if means else math.nan
+
+
+def bootstrap_cells(record: dict, layout: str) -> dict[str, dict]:
+    """Paired-bootstrap noise records of the E_v cells of one configuration over its test vehicles: a bin's
+    cell resamples that bin's vehicles, E_v (the mean of the bins) resamples every vehicle."""
+    from redsup.tables import noise
+
     out = {}
-    for path in paths:
-        record = json.loads(Path(path).read_text())
-        out[record["label"]] = {k: (math.nan if v is None else v) for k, v in record["metrics"].items()}
+    for col, (split, which) in error_columns(layout).items():
+        pt = record.get("per_track", {}).get(split)
+        if not pt or not pt["id"]:
+            continue
+        sq = {u: (math.nan if e is None else float(e)) for u, e in zip(pt["id"], pt["sq_err"])}
+        bins = dict(zip(pt["id"], pt["bin"]))
+        units = [u for u in pt["id"] if which is None or bins[u] == which]
+        if units:
+            out[col] = noise.bootstrap(unit_ids=units, statistic=lambda us, sq=sq, bins=bins, w=which:
+                                       _binned(sq, bins, us, w))
     return out
 
 
-def table_note(table_id: str, config: dict) -> str:
-    """Caption note: profile, estimator choices and units."""
+def configuration_table(layout: str, rows, results: dict[str, dict]):
+    """(ours, noise) of Table II (layout ``errors``) or the synthetic ablation (``ablation``): one line per row
+    label; a label with several runs (seeds) is their mean with the seed spread, a single run gets a paired
+    bootstrap over the test vehicles."""
+    from redsup.tables import noise as noise_lib
+    from redsup.velocity.summary import ablation_table, table2
+
+    build = table2 if layout == "errors" else ablation_table
+    by_label: dict[str, list[str]] = {}
+    for label, run, _ in rows:
+        by_label.setdefault(label, []).append(run)
+    lines, noise = [], {}
+    for label, runs in by_label.items():
+        per_seed = [build({label: _metrics(results[r])}) for r in runs]
+        line = per_seed[0].copy()
+        if len(runs) > 1:
+            for col in line.columns:
+                line.at[label, col] = float(np.mean([f.at[label, col] for f in per_seed]))
+            noise[label] = {col: noise_lib.seeds([f.at[label, col] for f in per_seed])
+                            for col in error_columns(layout) if col in line.columns}
+        else:
+            noise[label] = bootstrap_cells(results[runs[0]], layout)
+        lines.append(line)
+    ours = pd.concat(lines) if lines else build({})
+    return ours, noise
+
+
+def _metrics(record: dict) -> dict:
+    return {k: (math.nan if v is None else v) for k, v in record["metrics"].items()}
+
+
+def counts_table(record: dict) -> pd.DataFrame:
+    """Table I from the clip counts result: rows per split, Near / Medium / Far / Total."""
+    return pd.DataFrame.from_dict(record["counts"], orient="index").astype(int)
+
+
+def figure_table(record: dict) -> pd.DataFrame:
+    """A figure's numbers as written by its figure rule (``{"index_name", "rows": {row: {column: v}}}``)."""
+    df = pd.DataFrame.from_dict(record["rows"], orient="index")
+    df.index.name = record.get("index_name", "row")
+    return df
+
+
+def table_note(config: dict, table_cfg: dict) -> str:
+    """Caption note: profile, estimator choices and units, the table's own note."""
     v = config["velocity"]
-    parts = [f"Profile {config['profile']}; E_v in m^2/s^2 (TuSimple protocol, mean of the near / medium / far "
-             "bins by ground-truth distance), every annotated test vehicle scored"]
-    parts.append(f"geometric velocity = slope of the least-squares line through the last {v['geometric']['window']} "
-                 "eq. (1) ground points (the raw tracker boxes), times the frame rate")
-    parts.append(f"MLPs: {v['mlp']['layers']} x {v['mlp']['hidden']} CReLU, dropout {v['mlp']['dropout']}, "
-                 f"{v['mlp']['epochs']} epochs on tracker boxes, {v['mlp']['epochs_synthetic']} on generated tracks, "
-                 f"batch {v['mlp']['batch_size']}, Gaussian sigma {v['smoothing_sigma']:g} on inputs at training and "
-                 f"test time; synthetic tracks: {v['synthetic']['samples']} x samples_factor")
-    parts.append("constant = the training vehicles' mean velocity for every vehicle (ours, not in the thesis: "
-                 "the error of a predictor without information from the boxes)")
-    if table_id == "mccraith_ch3_table2":
-        parts.append("runtime = median time per track of the whole estimator, one track at a time, on one CPU "
-                     "thread (the thesis' 10 ms is on a GPU); E_p (m^2) only where the method estimates a position "
-                     "(eq. (1) at the last frame), the MLPs estimate velocity only")
-    else:
-        parts.append("abnormal = clips whose relative velocities are scaled by "
-                     f"{config['velocity_clips']['splits'].get('abnormal', {}).get('velocity_scale', 'n/a')}")
+    parts = [f"Profile {config['profile']}"]
+    if "rows" in table_cfg:
+        parts.append("E_v in m^2/s^2 (TuSimple protocol, mean of the near / medium / far bins by ground-truth "
+                     "distance), every annotated test vehicle scored")
+        parts.append(f"geometric velocity = slope of the least-squares line through the last "
+                     f"{v['geometric']['window']} eq. (1) ground points (the raw tracker boxes), times the frame rate")
+        parts.append(f"MLPs: {v['mlp']['layers']} x {v['mlp']['hidden']} CReLU, dropout {v['mlp']['dropout']}, "
+                     f"{v['mlp']['epochs']} epochs on tracker boxes, {v['mlp']['epochs_synthetic']} on generated "
+                     f"tracks, batch {v['mlp']['batch_size']}, Gaussian sigma {v['smoothing_sigma']:g} on inputs at "
+                     f"training and test time; synthetic tracks: {v['synthetic']['samples']} x samples_factor; "
+                     f"{v.get('seeds', 1)} training seeds per MLP (mean ± std over seeds); rows without learning: "
+                     "± = bootstrap standard error over the test vehicles")
+    if table_cfg.get("note"):
+        parts.append(str(table_cfg["note"]).rstrip("."))
     return "; ".join(parts)
 
 
