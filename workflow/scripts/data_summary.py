@@ -11,7 +11,7 @@ from redsup.fileio import write_text_atomic  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
 
 sm = snakemake  # noqa: F821
-with child_run(sm.log.run, "data_summary", "summary", rule=sm.rule, wildcards={}, config=sm.config) as run:
+with child_run(sm.log.run, next(iter(sm.config["prepare"]["tables"])), "summary", rule=sm.rule, wildcards={}, config=sm.config) as run:
     table = prepared_summary(sm.input.prepared)
     write_text_atomic(sm.output[0], json.dumps({"rows": table.to_dict(orient="records")}, indent=1, default=str))
     print(table.to_string())

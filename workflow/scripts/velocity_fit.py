@@ -7,12 +7,15 @@ import json  # noqa: E402
 
 from redsup.fileio import write_text_atomic  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
+from redsup.velocity import plan  # noqa: E402
 from redsup.velocity.data import load_split  # noqa: E402
 from redsup.velocity.synthetic import fit_statistics  # noqa: E402
 
 sm = snakemake  # noqa: F821
 vcfg = sm.config["velocity"]
-with child_run(sm.log.run, "mccraith_ch3_table2", "synthetic generator fit", rule=sm.rule, wildcards={},
+synthetic = [c["name"] for c in vcfg["configurations"] if c.get("train_on") == "synthetic"]
+parent = plan.parent(sm.config, synthetic[0]) if synthetic else next(iter(vcfg["tables"]))
+with child_run(sm.log.run, parent, "synthetic generator fit", rule=sm.rule, wildcards={},
                config=sm.config, params={"synthetic": vcfg["synthetic"], "min_box_px": vcfg["min_box_px"]}) as run:
     train = load_split(sm.input.tracks, sm.input.clips, vcfg["min_box_px"])
     print("training clips:", train.quality(), "bad input per clip:", train.bad_input_per_clip())
