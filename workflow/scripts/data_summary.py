@@ -13,5 +13,6 @@ from redsup.runlog import child_run  # noqa: E402
 sm = snakemake  # noqa: F821
 with child_run(sm.log.run, next(iter(sm.config["prepare"]["tables"])), "summary", rule=sm.rule, wildcards={}, config=sm.config) as run:
     table = prepared_summary(sm.input.prepared)
-    write_text_atomic(sm.output[0], json.dumps({"rows": table.to_dict(orient="records")}, indent=1, default=str))
+    rows = table.reset_index().to_dict(orient="records")
+    write_text_atomic(sm.output[0], json.dumps({"rows": rows}, indent=1, default=str))
     print(table.to_string())
