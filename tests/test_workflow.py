@@ -30,7 +30,7 @@ def test_second_run_has_nothing_to_do(built):
 
 
 def test_lidar_depth_agrees_with_renderer(built):
-    logs = list((built / "results" / "logs" / "lidar_depth").rglob("cam_front.log"))
+    logs = list((built / "results" / "logs" / "prepared").rglob("cam_front_depth.log"))
     assert logs
     for log in logs:
         summary = eval(log.read_text().strip().splitlines()[-1], {"nan": float("nan")})  # the printed dict
@@ -86,7 +86,7 @@ def test_truncated_lidar_fails_its_own_jobs_only(built, tmp_path):
     proc = run_snakemake(work, "--keep-going", str(victim.relative_to(work)), str(other.relative_to(work)),
                          check=False)
     assert proc.returncode != 0
-    log = (work / "results" / "logs" / "lidar_depth" / target / "cam_front.log").read_text()
+    log = (work / "results" / "logs" / "prepared" / target / "cam_front_depth.log").read_text()
     assert "000001.bin" in log and "not a multiple of the 16-byte record" in log
     assert not victim.exists() and not victim.with_name(victim.name + ".part").exists()
     assert other.exists()

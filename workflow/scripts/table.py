@@ -4,6 +4,8 @@ import sys
 
 sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821  (log first)
 
+import json  # noqa: E402
+
 from redsup.runlog import child_run  # noqa: E402
 from redsup.sceneio import read_json  # noqa: E402
 from redsup.tables import write_table  # noqa: E402
@@ -25,7 +27,7 @@ def _rows_param(rows):
 
 results = {run: read_json(plan.result_path(run)) for run in dict.fromkeys(run for _, run, _ in rows)}
 with child_run(sm.log.run, table_id, "table", rule=sm.rule, wildcards=dict(sm.wildcards), config=sm.config,
-               params={"rows": _rows_param(rows)}) as run:
+               params={"rows": json.dumps(_rows_param(rows), ensure_ascii=False)}) as run:
     frame = plan.table_frame(table_id, sm.config, rows, results)
     score = write_table(table_id, frame.ours, sm.output.md, sm.output.csv, sm.output.tex,
                         extra_claims=frame.extra_claims, note=frame.note, noise=frame.noise)
