@@ -359,3 +359,30 @@ def test_seed_runs_and_seed_rows(tmp_path):
     assert report._binned({f"0/{i}": v for i, v in enumerate([1.0, 3.0, 7.0, 9.0])},
                           {f"0/{i}": b for i, b in enumerate([0, 1, 2, 2])}, [f"0/{i}" for i in range(4)],
                           None) == pytest.approx(4.0)
+
+
+def test_configured_tables_share_runs_and_seed_counts():
+    """config.yaml: the ablation shows Table II's rows (the same runs, no extra training) beside the two
+    variants, so its claims against MLP-tracker have their row; MLPs train 3 seeds in default, 2 in tiny,
+    the rows without learning once."""
+    from redsup import config as config_lib
+    from redsup.velocity import plan
+
+    root = Path(__file__).resolve().parents[1]
+    for profile, n_seeds in (("default", 3), ("tiny", 2)):
+        cfg = config_lib.load(root / "config.yaml", {"profile": profile})
+        rows = plan.rows(cfg)
+        tables = cfg["velocity"]["tables"]
+        t2, ab = (next(t for t, tc in tables.items() if tc.get("layout") == lay) for lay in ("errors", "ablation"))
+        labels_t2 = {label for label, _, _ in rows[t2]}
+        assert labels_t2 <= {label for label, _, _ in rows[ab]}
+        assert {"Ours (MLP-tracker)", "geometric reprojection"} <= labels_t2
+        runs_of = {}
+        for label, run, _ in rows[ab]:
+            runs_of.setdefault(label, []).append(run)
+        assert len(runs_of["Ours (MLP-tracker)"]) == n_seeds and runs_of["geometric reprojection"] == ["geometric"]
+        assert plan.runs(cfg)["mlp_tracker"]["tables"] == [t2, ab]
+        # Table I: one clip-count result, a row per split
+        counts = next(t for t, tc in tables.items() if "counts" in tc)
+        assert rows[counts] == [("Train", "clip_counts", None), ("Test", "clip_counts", None)]
+        assert plan.result_path("clip_counts") == "results/velocity/clip_counts.json"

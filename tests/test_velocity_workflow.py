@@ -69,3 +69,12 @@ def test_child_runs_have_training_curves_and_parents(built):
         assert record["parent"] == figure
         assert any(path.endswith(f"{figure}.png") for path, _ in record["artifacts"])
         assert any(path.endswith(f"{figure}.png") for path, _ in record["parent_artifacts"])
+
+
+def test_ablation_shows_the_table2_rows_with_their_noise(built):
+    df = pd.read_csv(built / "results" / "tables" / "mccraith_ch3_synthetic_ablation.csv").set_index("configuration")
+    for row in ("Ours (MLP-tracker)", "Ours (MLP-synthetic)", "MLP-synthetic, abnormal velocities (x3)",
+                "geometric reprojection"):
+        assert df.at[row, "status"].startswith("ours"), row
+        assert np.isfinite(float(df.at[row, "E_v (abnormal) (ours)"]))
+        assert np.isfinite(float(df.at[row, "E_v (abnormal) (ours) std"]))
