@@ -386,3 +386,25 @@ def test_configured_tables_share_runs_and_seed_counts():
         counts = next(t for t, tc in tables.items() if "counts" in tc)
         assert rows[counts] == [("Train", "clip_counts", None), ("Test", "clip_counts", None)]
         assert plan.result_path("clip_counts") == "results/velocity/clip_counts.json"
+
+
+def test_mlp_checkpoint_is_the_one_format_with_the_config(tmp_path):
+    """save_model writes a redsup.checkpoint of kind velocity_mlp (resolved config inside); load_model
+    rebuilds the same network (same outputs) and refuses another kind."""
+    from redsup import checkpoint
+
+    torch.manual_seed(0)
+    model = mlp.VelocityMLP(in_dim=12, hidden=5, layers=2, dropout=0.0)
+    model.eval()
+    path = tmp_path / "model.pt"
+    config = {"profile": "tiny", "velocity": {"smoothing_sigma": 5.0}}
+    mlp.save_model(model, path, config, {"smoothing_sigma": 5.0})
+    data = checkpoint.load(path, "velocity_mlp")
+    assert data["config"] == config and data["meta"]["smoothing_sigma"] == 5.0
+    loaded, meta = mlp.load_model(path)
+    x = torch.randn(3, 12)
+    with torch.no_grad():
+        assert torch.allclose(loaded(x), model(x))
+    assert meta["network"] == model.config and not list(tmp_path.glob("*.part"))
+    with pytest.raises(ValueError, match="expected 'depth'"):
+        checkpoint.load(path, "depth")
