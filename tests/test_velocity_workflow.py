@@ -65,7 +65,7 @@ def test_child_runs_have_training_curves_and_parents(built):
     parents = {json.loads((runs / "velocity" / n / "metrics.json").read_text())["parent"] for n in CONFIGS}
     assert parents == {"mccraith_ch3_table2", "mccraith_ch3_synthetic_ablation"}
     for figure in ("mccraith_ch3_fig3", "mccraith_ch3_fig6"):
-        record = json.loads((runs / "velocity" / "figures" / f"{figure}.json").read_text())
+        record = json.loads((runs / "figures" / f"{figure}.json").read_text())  # the PNG rule
         assert record["parent"] == figure
         assert any(path.endswith(f"{figure}.png") for path, _ in record["artifacts"])
         assert any(path.endswith(f"{figure}.png") for path, _ in record["parent_artifacts"])
@@ -78,3 +78,12 @@ def test_ablation_shows_the_table2_rows_with_their_noise(built):
         assert df.at[row, "status"].startswith("ours"), row
         assert np.isfinite(float(df.at[row, "E_v (abnormal) (ours)"]))
         assert np.isfinite(float(df.at[row, "E_v (abnormal) (ours) std"]))
+
+
+def test_figure_numbers_feed_the_table_and_the_png(built):
+    """The figure rule writes only its PNG; its numbers (table rows + plotted data) are a result of their own."""
+    for figure in ("mccraith_ch3_fig3", "mccraith_ch3_fig6"):
+        numbers = json.loads((built / "results" / "velocity" / "figures" / f"{figure}.json").read_text())
+        assert numbers["rows"] and numbers["plot"]["figure"] in ("vehicle_statistics", "sequences")
+        record = json.loads((built / "results" / "runs" / "velocity" / "figures" / f"{figure}.json").read_text())
+        assert record["status"] == "FINISHED" and record["parent"] == figure

@@ -4,7 +4,8 @@
 # velocity_baseline       results/velocity/{run}/metrics.json           geometric / constant (no learning)
 # velocity_mlp            results/velocity/{run}/{metrics.json,model.pt} one MLP configuration and seed
 # velocity_clip_counts    results/velocity/clip_counts.json             Table I's counts
-# velocity_figure         results/figures/{figure}.png + results/velocity/figures/{figure}.json (its numbers)
+# velocity_figure_numbers results/velocity/figures/{figure}.json  a figure's table rows and plotted data
+# velocity_figure         results/figures/{figure}.png              the figure, drawn from its numbers
 # The configurations and tables are data (config `velocity.configurations`, `velocity.tables.<table id>`),
 # planned by redsup.velocity.plan; rule table builds every table.
 import re
@@ -115,17 +116,37 @@ rule velocity_clip_counts:
         "../scripts/velocity_clip_counts.py"
 
 
-rule velocity_figure:
+rule velocity_figure_numbers:
     input:
         tracks="results/prepared/clips/train/medianflow.npz",
         clips="results/raw/clips/train",
         generator="results/velocity/generator_statistics.json",
     output:
-        png="results/figures/{figure}.png",
-        numbers="results/velocity/figures/{figure}.json",
+        "results/velocity/figures/{figure}.json",
     log:
         "results/logs/velocity/figures/{figure}.log",
         run="results/runs/velocity/figures/{figure}.json",
+    wildcard_constraints:
+        figure="|".join(VELOCITY_FIGURES) or "(?!)",
+    threads: 1
+    resources:
+        mem_mb=1000,
+        runtime=10,
+    conda:
+        ENV
+    script:
+        "../scripts/velocity_figure_numbers.py"
+
+
+rule velocity_figure:
+    input:
+        numbers="results/velocity/figures/{figure}.json",
+        generator="results/velocity/generator_statistics.json",
+    output:
+        "results/figures/{figure}.png",
+    log:
+        "results/logs/figures/{figure}.log",
+        run="results/runs/figures/{figure}.json",
     wildcard_constraints:
         figure="|".join(VELOCITY_FIGURES) or "(?!)",
     threads: 1

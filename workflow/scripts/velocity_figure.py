@@ -1,5 +1,5 @@
-"""Snakemake entry point: a ch. 3 figure (Fig. 3 vehicle statistics with the constraint lines, or Fig. 6 real
-vs synthetic box sequences) as PNG, and its numbers as JSON (read by rule table)."""
+"""Snakemake entry point: a ch. 3 figure's PNG (Fig. 3 vehicle statistics with the constraint lines and the
+generator's fits, or Fig. 6 real vs synthetic box sequences), drawn from the data its numbers job wrote."""
 import sys
 
 sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821  (log first)
@@ -9,48 +9,32 @@ from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from redsup.fileio import write_text_atomic  # noqa: E402
-from redsup.prep.seeds import derive_seed  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
-from redsup.velocity.data import load_split  # noqa: E402
+from redsup.velocity.geometry import Calibration  # noqa: E402
 from redsup.velocity.report import save_figure  # noqa: E402
-from redsup.velocity.summary import fig3_table, fig3_values, fig6_table, plot_fig3, plot_fig6  # noqa: E402
-from redsup.velocity.synthetic import generate_tracks  # noqa: E402
+from redsup.velocity.summary import plot_fig3, plot_fig6  # noqa: E402
 
 sm = snakemake  # noqa: F821
-vcfg = sm.config["velocity"]
 figure_id = sm.wildcards.figure
-kind = vcfg["tables"][figure_id]["figure"]
 
 
-def vehicle_statistics(train, stats):
-    values = fig3_values(train, train.calib)
-    return plot_fig3(values, train.calib, stats), fig3_table(values, train.calib)
+def vehicle_statistics(plot, stats):
+    values = {k: np.asarray(v, dtype=np.float64) for k, v in plot["values"].items()}
+    return plot_fig3(values, Calibration(**plot["calibration"]), stats)
 
 
-def sequences(train, stats):
-    real = train.boxes[train.usable]
-    rng = np.random.default_rng(derive_seed(sm.config["seed"], "velocity", "fig6"))
-    synthetic = generate_tracks(stats, max(len(real), 1), rng)["boxes"]
-    k = vcfg["figure_tracks"]
-    show = rng.permutation(len(real))[:k]
-    settings = {"sequence length": stats["n_frames"], "frame rate": stats["fps"],
-                "synthetic training samples": vcfg["synthetic"]["samples"],
-                "test-time Gaussian smoothing sigma": vcfg["smoothing_sigma"]}
-    return plot_fig6(real[show], synthetic[:k], stats["fps"]), fig6_table(real, synthetic, settings)
+def sequences(plot, stats):
+    real, synthetic = (np.asarray(plot[k], dtype=np.float64).reshape(-1, stats["n_frames"], 4)
+                       for k in ("real", "synthetic"))
+    return plot_fig6(real, synthetic, plot["fps"])
 
 
 DRAW = {"vehicle_statistics": vehicle_statistics, "sequences": sequences}
 with child_run(sm.log.run, figure_id, "figure", rule=sm.rule, wildcards=dict(sm.wildcards), config=sm.config,
-               params={"figure": kind, "min_box_px": vcfg["min_box_px"], "figure_tracks": vcfg["figure_tracks"]}) as run:
-    train = load_split(sm.input.tracks, sm.input.clips, vcfg["min_box_px"])
+               params={}) as run:
+    plot = json.loads(Path(sm.input.numbers).read_text())["plot"]
     stats = json.loads(Path(sm.input.generator).read_text())
-    fig, table = DRAW[kind](train, stats)
-    save_figure(fig, sm.output.png)
+    fig = DRAW[plot["figure"]](plot, stats)
+    save_figure(fig, sm.output[0])
     run.log_figure(fig, f"{figure_id}.png")
-    run.log_parent_artifact(sm.output.png, "figure")
-    rows = {str(r): {c: (None if isinstance(v, float) and np.isnan(v) else v) for c, v in line.items()}
-            for r, line in table.to_dict(orient="index").items()}
-    write_text_atomic(sm.output.numbers, json.dumps({"index_name": table.index.name or "row", "rows": rows},
-                                                    indent=1, default=float))
-    print(table.to_string())
+    run.log_parent_artifact(sm.output[0], "figure")
