@@ -17,26 +17,12 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
+from redsup.tables.contract import parse_run, run_id, training_seed  # noqa: F401 (part of this plan)
+
 from redsup.lifting import plan as lifting_plan
 
 SPLIT_PREFIXES = {"train": ("train_", "long_"), "test": ("test_",)}
 LIFTING = "lifting:"          # prefix of the ch. 6 runs a table row reads
-
-
-def run_id(conf: str, seed: int) -> str:
-    return f"{conf}/seed{int(seed)}"
-
-
-def parse_run(run: str) -> tuple[str, int]:
-    """``<conf>/seed<k>`` -> (conf, k)."""
-    conf, _, seed = run.rpartition("/seed")
-    if not conf or not seed.isdigit():
-        raise ValueError(f"detector run id {run!r} is not <configuration>/seed<k>")
-    return conf, int(seed)
-
-
-def training_seed(config: Mapping, seed: int) -> int:
-    return int(config["seed"]) + int(seed)
 
 
 def split_scenes(scenes: list[str], split: str) -> list[str]:

@@ -14,22 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Mapping
 
-
-def run_id(conf: str, seed: int) -> str:
-    return f"{conf}/seed{int(seed)}"
-
-
-def parse_run(run: str) -> tuple[str, int]:
-    """``<conf>/seed<k>`` -> (conf, k)."""
-    conf, _, seed = run.rpartition("/seed")
-    if not conf or not seed.isdigit():
-        raise ValueError(f"lifting run id {run!r} is not <configuration>/seed<k>")
-    return conf, int(seed)
-
-
-def training_seed(config: Mapping, seed: int) -> int:
-    """The seed a run trains with: the workflow's ``seed`` plus the run's seed index."""
-    return int(config["seed"]) + int(seed)
+from redsup.tables.contract import parse_run, run_id, training_seed  # noqa: F401 (part of this plan)
 
 
 def split_scenes(scene_ids: list[str], splits) -> list[str]:

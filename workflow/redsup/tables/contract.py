@@ -36,6 +36,24 @@ class TableFrame:
     extra_claims: list = field(default_factory=list)
 
 
+def run_id(conf: str, seed: int) -> str:
+    """Run id of one configuration trained with seed index ``seed``: ``<conf>/seed<k>``."""
+    return f"{conf}/seed{int(seed)}"
+
+
+def parse_run(run: str) -> tuple[str, int]:
+    """``<conf>/seed<k>`` -> (conf, k)."""
+    conf, _, seed = run.rpartition("/seed")
+    if not conf or not seed.isdigit():
+        raise ValueError(f"run id {run!r} is not <configuration>/seed<k>")
+    return conf, int(seed)
+
+
+def training_seed(config, seed: int) -> int:
+    """The seed a run trains with: the workflow's ``seed`` plus the run's seed index."""
+    return int(config["seed"]) + int(seed)
+
+
 def plan_module(stage: str, registry: dict | None = None) -> ModuleType:
     reg = registry or load_registry()
     try:

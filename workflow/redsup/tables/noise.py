@@ -73,12 +73,6 @@ def seeds(values: Sequence[float]) -> dict:
     return {"kind": "seeds", "values": [float(v) for v in values]}
 
 
-def center(noise: Mapping) -> float:
-    """The cell value a record stands for: the seed mean (a bootstrap record's centre is the caller's
-    full-sample value, so this is only used for seeds)."""
-    return float(np.mean(noise["values"]))
-
-
 def spread(noise: Mapping | None) -> float | None:
     """Standard deviation shown beside a cell: over seeds, or of the bootstrap replicates (standard error)."""
     if not noise or len(noise.get("values", ())) < 2:
