@@ -127,11 +127,22 @@ def test_calibration_runs_on_the_adapted_kitti_raw_scene(scene, tmp_path):
 
 @pytest.mark.workflow
 def test_dag_calibrates_a_kitti_raw_dataset(tmp_path):
-    """Dry run: calibration.dataset set to an adapted KITTI raw dataset plans calibration_eval on its scene
-    (the raw scene folder, hence its extrinsics, is an input; no world domain is consulted)."""
+    """Dry run: calibration.dataset set to an adapted KITTI raw dataset (test scenes only) plans
+    calibration_eval on its scene, predicted by the model of calibration.model_dataset; the raw scene folder,
+    hence its extrinsics, is an input. Without model_dataset the plan fails, naming the key to set."""
     cfg = tmp_path / "real.yaml"
-    cfg.write_text(yaml.safe_dump({"datasets": {"real_raw": raw_spec()}, "calibration": {"dataset": "real_raw"}}))
     target = "results/calibration/real_raw/M/road_L30_W3.json"
+    cal = {"dataset": "real_raw", "model_dataset": None}
+    cfg.write_text(yaml.safe_dump({"datasets": {"real_raw": raw_spec()}, "calibration": cal}))
+    failed = run_snakemake(tmp_path / "w0", "-n", target, "--configfile", str(cfg), check=False)
+    assert failed.returncode != 0
+    assert "no depth model 'real_raw/M'" in failed.stderr + failed.stdout
+    assert "calibration.model_dataset" in failed.stderr + failed.stdout
+
+    cfg.write_text(yaml.safe_dump({"datasets": {"real_raw": raw_spec()},
+                                   "calibration": {**cal, "model_dataset": "world_kitti"}}))
     out = run_snakemake(tmp_path / "w", "-n", target, "--configfile", str(cfg)).stdout
     assert any(line.split()[:2] == ["calibration_eval", "1"] for line in out.splitlines()), out[-3000:]
-    assert f"results/raw/real_raw/{RAW_SCENE}" in out and "world_scene" not in out
+    assert f"results/raw/real_raw/{RAW_SCENE}" in out
+    assert "results/depth/models/world_kitti/M.pt" in out and "results/depth/models/real_raw" not in out
+    assert "results/raw/world_kitti/test_" not in out  # the world's test scenes are not consulted

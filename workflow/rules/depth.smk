@@ -2,6 +2,7 @@
 #
 # train_depth    results/depth/models/{dataset}/{mode}[/seed{k}].pt one model (M, S, MS, M_frontback, ...) per seed
 # predict_depth  results/depth/predictions/{dataset}/{mode}/{scene}.npz   raw network depth of every frame
+#                (the mode's model of calibration.model_dataset when set, else of the dataset)
 # depth_eval     results/depth/eval/{run}.json                      one configuration (a child run)
 # depth_figure   results/figures/<id>.png                           Figs. 4 and 5 (their tables: rule table)
 # The tables are data (config `depth.tables.<table id>`), expanded by redsup.depth.plan; rows that need the
@@ -37,7 +38,7 @@ rule train_depth:
 
 rule predict_depth:
     input:
-        model="results/depth/models/{dataset}/{mode}.pt",
+        model=lambda wc: depth_plan.prediction_model(config, wc.dataset, wc.mode, scenes_of),
         images="results/prepared/{dataset}/{scene}/cam_front.npz",
     output:
         "results/depth/predictions/{dataset}/{mode}/{scene}.npz",

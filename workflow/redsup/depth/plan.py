@@ -193,6 +193,22 @@ def models(config: Mapping, scenes_of) -> list[str]:
     return [m for b in base for m in seed_models(b, n_seeds(d, b))]
 
 
+def prediction_model(config: Mapping, dataset: str, mode: str, scenes_of) -> str:
+    """Checkpoint that ``predict_depth`` runs on ``dataset``'s frames: the ``<mode>`` model (seed 0) of
+    ``calibration.model_dataset`` for the calibrated dataset when that is set, else of ``dataset`` itself.
+    A model that no configured training can produce is an error naming what to set."""
+    cal = config["calibration"]
+    source = (cal.get("model_dataset") or dataset) if dataset == cal["dataset"] else dataset
+    model = f"{source}/{mode}"
+    if model not in models(config, scenes_of):
+        raise ValueError(
+            f"no depth model {model!r} to predict dataset {dataset!r}: depth.models must list "
+            f"{{dataset: {source}, mode: {mode}}} and {source!r} needs training scenes with the mode's cameras"
+            + ("" if source != dataset else "; for a test-only dataset set calibration.model_dataset "
+               "to the dataset whose model should predict it"))
+    return f"results/depth/models/{model}.pt"
+
+
 def model_parent(config: Mapping, model: str) -> str:
     """The MLflow parent of a model's training and prediction runs: the first table that uses it."""
     used = model_tables(config, model)
