@@ -268,6 +268,28 @@ def test_constant_tables_reproduce_no_order_or_best_claim():
                 n_checked += 1
                 assert c["verdict"] != "reproduces", (table_id, c)
     assert n_checked > 40
+    n_close = 0
+    for table_id, ours in _constant_tables(0.0).items():  # all at 0: no close claim holds on a floor
+        for claim, c in zip(reg["tables"][table_id]["claims"], evaluate_claims(table_id, ours)):
+            checks = claim.get("check") or []
+            if any(k["type"] == "close" for k in (checks if isinstance(checks, list) else [checks])):
+                n_close += 1
+                assert c["verdict"] != "reproduces", (table_id, c)
+    assert n_close >= 5
+
+
+def test_identical_cells_without_spread_do_not_show_closeness():
+    """Two rows both at 0 AP with no spread (a floor: nothing detected) are not evidence that they are
+    close; 60.0 vs 60.5 or 60.0 vs 60.0 as single values inside the tolerance are."""
+    rows = ["(b) 2D Mask", "(c) 2D Mask, multi-view"]
+    claim = [{"text": "close", "check": {"type": "close", "a": rows[1], "b": rows[0], "tol": 1.0}}]
+    floor = pd.DataFrame({"AP_BEV Moderate": [0.0, 0.0]}, index=rows)
+    c = evaluate_claims("mccraith_ch6_table1", floor, extra_claims=claim)[-1]
+    assert c["verdict"] == "inconclusive" and "equivalence not shown" in c["evidence"]
+    near = pd.DataFrame({"AP_BEV Moderate": [60.0, 60.5]}, index=rows)
+    assert evaluate_claims("mccraith_ch6_table1", near, extra_claims=claim)[-1]["verdict"] == "reproduces"
+    same = pd.DataFrame({"AP_BEV Moderate": [60.0, 60.0]}, index=rows)
+    assert evaluate_claims("mccraith_ch6_table1", same, extra_claims=claim)[-1]["verdict"] == "reproduces"
 
 
 def test_tie_is_inconclusive_not_a_win():

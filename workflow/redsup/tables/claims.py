@@ -245,8 +245,10 @@ def evaluate_check(check: Mapping, cells: _Cells, headline: str | None) -> tuple
             tol = float(check["tol"]) * (abs(b) if check.get("relative") else 1.0)
             lo, hi, how = noise_lib.difference_interval(a, b, cells.noise_of(check["a"], metric),
                                                         cells.noise_of(check["b"], metric))
-            if math.isnan(lo):
+            floor = a == b == 0.0 and lo == hi  # both cells 0 without any spread: a floor, not an equivalence
+            if math.isnan(lo) or floor:
                 verdict = INCONCLUSIVE
+                how = how + "; both 0 without spread (a floor): equivalence not shown" if floor else how
             elif -tol - 1e-12 <= lo and hi <= tol + 1e-12:
                 verdict = REPRODUCES
             elif lo > tol or hi < -tol:
