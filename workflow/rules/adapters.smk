@@ -13,6 +13,8 @@ rule adapt_scene:
     log:
         "results/logs/raw/{dataset}/{scene}.log",
         run="results/runs/raw/{dataset}/{scene}.json",
+    benchmark:
+        "results/benchmarks/adapt_scene/raw/{dataset}/{scene}.tsv",
     threads: 1
     resources:
         mem_mb=2000,
@@ -32,6 +34,8 @@ rule adapt_clips:
     log:
         "results/logs/raw/clips/{split}.log",
         run="results/runs/raw/clips/{split}.json",
+    benchmark:
+        "results/benchmarks/adapt_clips/raw/clips/{split}.tsv",
     threads: 1
     resources:
         mem_mb=1000,

@@ -22,6 +22,8 @@ rule calibration_eval:
     log:
         "results/logs/calibration/{dataset}/{mode}/{method}.log",
         run="results/runs/calibration/{dataset}/{mode}/{method}.json",
+    benchmark:
+        "results/benchmarks/calibration_eval/calibration/{dataset}/{mode}/{method}.tsv",
     params:
         parent=lambda wc: calib_plan.parent_of(config, scenes_of, wc.dataset, wc.mode, wc.method),
     wildcard_constraints:
@@ -47,6 +49,8 @@ rule calibration_series:
     log:
         "results/logs/calibration/{dataset}/{mode}/series_{split}.log",
         run="results/runs/calibration/{dataset}/{mode}/series_{split}.json",
+    benchmark:
+        "results/benchmarks/calibration_series/calibration/{dataset}/{mode}/series_{split}.tsv",
     params:
         parent=lambda wc: calib_plan.parent_of(config, scenes_of, wc.dataset, wc.mode, f"series_{wc.split}"),
     wildcard_constraints:
@@ -70,6 +74,8 @@ rule calibration_fig1:
     log:
         "results/logs/figures/{figure}.log",
         run="results/runs/figures/{figure}.json",
+    benchmark:
+        "results/benchmarks/calibration_fig1/figures/{figure}.tsv",
     wildcard_constraints:
         figure="|".join(CALIB_FIGURES) or "(?!)",
     threads: 1

@@ -24,6 +24,8 @@ rule train_depth:
     log:
         "results/logs/depth/models/{model}.log",
         run="results/runs/depth/models/{model}.json",
+    benchmark:
+        "results/benchmarks/train_depth/depth/models/{model}.tsv",
     wildcard_constraints:
         model="|".join(re.escape(m) for m in DEPTH_MODELS) or "(?!)",
     threads: 1
@@ -45,6 +47,8 @@ rule predict_depth:
     log:
         "results/logs/depth/predictions/{dataset}/{mode}/{scene}.log",
         run="results/runs/depth/predictions/{dataset}/{mode}/{scene}.json",
+    benchmark:
+        "results/benchmarks/predict_depth/depth/predictions/{dataset}/{mode}/{scene}.tsv",
     wildcard_constraints:
         mode=r"[A-Za-z0-9_]+",
     threads: 1
@@ -67,6 +71,8 @@ rule depth_eval:
     log:
         "results/logs/depth/eval/{run}.log",
         run="results/runs/depth/eval/{run}.json",
+    benchmark:
+        "results/benchmarks/depth_eval/depth/eval/{run}.tsv",
     wildcard_constraints:
         run="|".join(re.escape(r) for r in sorted(DEPTH_RUNS)) or "no_depth_runs",
     threads: 1
@@ -87,6 +93,8 @@ rule depth_figure:
     log:
         "results/logs/figures/{figure}.log",
         run="results/runs/figures/{figure}.json",
+    benchmark:
+        "results/benchmarks/depth_figure/figures/{figure}.tsv",
     params:
         rows=lambda wc: [list(r) for r in TABLE_ROWS.get(wc.figure, [])],
     wildcard_constraints:

@@ -10,6 +10,8 @@ rule detect_instances:
     log:
         "results/logs/prepared/{dataset}/{scene}/detections_{level}.log",
         run="results/runs/prepared/{dataset}/{scene}/detections_{level}.json",
+    benchmark:
+        "results/benchmarks/detect_instances/prepared/{dataset}/{scene}/detections_{level}.tsv",
     threads: 1
     resources:
         mem_mb=2000,
@@ -28,6 +30,8 @@ rule segment_road:
     log:
         "results/logs/prepared/{dataset}/{scene}/road.log",
         run="results/runs/prepared/{dataset}/{scene}/road.json",
+    benchmark:
+        "results/benchmarks/segment_road/prepared/{dataset}/{scene}/road.tsv",
     threads: 1
     resources:
         mem_mb=2000,
@@ -47,6 +51,8 @@ rule tracks3d:
     log:
         "results/logs/prepared/{dataset}/{scene}/tracks3d_{level}.log",
         run="results/runs/prepared/{dataset}/{scene}/tracks3d_{level}.json",
+    benchmark:
+        "results/benchmarks/tracks3d/prepared/{dataset}/{scene}/tracks3d_{level}.tsv",
     threads: 1
     resources:
         mem_mb=1000,
@@ -65,6 +71,8 @@ rule medianflow:
     log:
         "results/logs/prepared/clips/{split}/medianflow.log",
         run="results/runs/prepared/clips/{split}/medianflow.json",
+    benchmark:
+        "results/benchmarks/medianflow/prepared/clips/{split}/medianflow.tsv",
     threads: 1
     resources:
         mem_mb=2000,

@@ -22,6 +22,8 @@ rule lidar_detector_split:
     log:
         "results/logs/lidar_detector/data/{split}.log",
         run="results/runs/lidar_detector/data/{split}.json",
+    benchmark:
+        "results/benchmarks/lidar_detector_split/lidar_detector/data/{split}.tsv",
     wildcard_constraints:
         split="train|test",
     threads: 1
@@ -45,6 +47,8 @@ rule lidar_detector_train:
     log:
         "results/logs/lidar_detector/metrics/{conf}/seed{seed}.log",
         run="results/runs/lidar_detector/metrics/{conf}/seed{seed}.json",
+    benchmark:
+        "results/benchmarks/lidar_detector_train/lidar_detector/metrics/{conf}/seed{seed}.tsv",
     wildcard_constraints:
         conf="|".join(LD_CONFS),
         seed="|".join(LD_SEEDS),

@@ -24,6 +24,8 @@ rule lifting_run:
     log:
         "results/logs/lifting/metrics/{conf}/seed{seed}.log",
         run="results/runs/lifting/metrics/{conf}/seed{seed}.json",
+    benchmark:
+        "results/benchmarks/lifting_run/lifting/metrics/{conf}/seed{seed}.tsv",
     wildcard_constraints:
         conf="|".join(LIFT_CONFS),
         seed="|".join(LIFT_SEEDS),
@@ -45,6 +47,8 @@ rule lifting_labels:
     log:
         "results/logs/lifting/labels/{conf}/seed{seed}.log",
         run="results/runs/lifting/labels/{conf}/seed{seed}.json",
+    benchmark:
+        "results/benchmarks/lifting_labels/lifting/labels/{conf}/seed{seed}.tsv",
     wildcard_constraints:
         conf="|".join(LIFT_CONFS),
         seed="|".join(LIFT_SEEDS),

@@ -9,6 +9,8 @@ rule prepare_camera:
     log:
         "results/logs/prepared/{dataset}/{scene}/{camera}.log",
         run="results/runs/prepared/{dataset}/{scene}/{camera}.json",
+    benchmark:
+        "results/benchmarks/prepare_camera/prepared/{dataset}/{scene}/{camera}.tsv",
     threads: 1
     resources:
         mem_mb=2000,
@@ -27,6 +29,8 @@ rule lidar_depth:
     log:
         "results/logs/prepared/{dataset}/{scene}/{camera}_depth.log",
         run="results/runs/prepared/{dataset}/{scene}/{camera}_depth.json",
+    benchmark:
+        "results/benchmarks/lidar_depth/prepared/{dataset}/{scene}/{camera}_depth.tsv",
     threads: 1
     resources:
         mem_mb=2000,

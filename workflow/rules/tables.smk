@@ -16,6 +16,8 @@ rule table:
     log:
         "results/logs/tables/{table}.log",
         run="results/runs/tables/{table}.json",
+    benchmark:
+        "results/benchmarks/table/tables/{table}.tsv",
     params:
         rows=lambda wildcards: [list(r) for r in TABLE_ROWS.get(wildcards.table, [])],
     wildcard_constraints:
@@ -37,6 +39,8 @@ rule data_summary:
     log:
         "results/logs/data/summary.log",
         run="results/runs/data/summary.json",
+    benchmark:
+        "results/benchmarks/data_summary/data/summary.tsv",
     threads: 1
     resources:
         mem_mb=2000,
@@ -56,6 +60,8 @@ rule world_frame_overview:
     log:
         "results/logs/figures/world_frame_overview.log",
         run="results/runs/figures/world_frame_overview.json",
+    benchmark:
+        "results/benchmarks/world_frame_overview/figures/world_frame_overview.tsv",
     threads: 1
     resources:
         mem_mb=2000,
@@ -73,6 +79,8 @@ rule scorecard:
         "results/tables/scorecard.md",
     log:
         "results/logs/tables/scorecard.log",
+    benchmark:
+        "results/benchmarks/scorecard/tables/scorecard.tsv",
     threads: 1
     resources:
         mem_mb=500,

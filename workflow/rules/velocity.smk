@@ -28,6 +28,8 @@ rule velocity_fit_generator:
     log:
         "results/logs/velocity/generator_statistics.log",
         run="results/runs/velocity/generator_statistics.json",
+    benchmark:
+        "results/benchmarks/velocity_fit_generator/velocity/generator_statistics.tsv",
     threads: 1
     resources:
         mem_mb=1000,
@@ -50,6 +52,8 @@ rule velocity_baseline:
     log:
         "results/logs/velocity/{run}/metrics.log",
         run="results/runs/velocity/{run}/metrics.json",
+    benchmark:
+        "results/benchmarks/velocity_baseline/velocity/{run}/metrics.tsv",
     params:
         run=lambda wc: VELOCITY_RUNS[wc.run],
     wildcard_constraints:
@@ -84,6 +88,8 @@ rule velocity_mlp:
     log:
         "results/logs/velocity/{run}/metrics.log",
         run="results/runs/velocity/{run}/metrics.json",
+    benchmark:
+        "results/benchmarks/velocity_mlp/velocity/{run}/metrics.tsv",
     params:
         run=lambda wc: VELOCITY_RUNS[wc.run],
     wildcard_constraints:
@@ -106,6 +112,8 @@ rule velocity_clip_counts:
     log:
         "results/logs/velocity/clip_counts.log",
         run="results/runs/velocity/clip_counts.json",
+    benchmark:
+        "results/benchmarks/velocity_clip_counts/velocity/clip_counts.tsv",
     threads: 1
     resources:
         mem_mb=1000,
@@ -126,6 +134,8 @@ rule velocity_figure_numbers:
     log:
         "results/logs/velocity/figures/{figure}.log",
         run="results/runs/velocity/figures/{figure}.json",
+    benchmark:
+        "results/benchmarks/velocity_figure_numbers/velocity/figures/{figure}.tsv",
     wildcard_constraints:
         figure="|".join(VELOCITY_FIGURES) or "(?!)",
     threads: 1
@@ -147,6 +157,8 @@ rule velocity_figure:
     log:
         "results/logs/figures/{figure}.log",
         run="results/runs/figures/{figure}.json",
+    benchmark:
+        "results/benchmarks/velocity_figure/figures/{figure}.tsv",
     wildcard_constraints:
         figure="|".join(VELOCITY_FIGURES) or "(?!)",
     threads: 1

@@ -11,6 +11,8 @@ rule world_scene:
     log:
         "results/logs/raw/{dataset}/{scene}.log",
         run="results/runs/raw/{dataset}/{scene}.json",
+    benchmark:
+        "results/benchmarks/world_scene/raw/{dataset}/{scene}.tsv",
     threads: 1
     resources:
         mem_mb=3000,
@@ -30,6 +32,8 @@ rule world_clips:
     log:
         "results/logs/raw/clips/{split}.log",
         run="results/runs/raw/clips/{split}.json",
+    benchmark:
+        "results/benchmarks/world_clips/raw/clips/{split}.tsv",
     threads: 1
     resources:
         mem_mb=3000,
