@@ -92,7 +92,8 @@ def edge_aware_smoothness(disp: torch.Tensor, image: torch.Tensor) -> tuple[torc
 def self_supervised_loss(target: torch.Tensor, warped: torch.Tensor | Sequence[Sequence[torch.Tensor]],
                          identity: torch.Tensor | Sequence[torch.Tensor], disps: Sequence[torch.Tensor], *,
                          smoothness_weight: float = 1e-3, alpha: float = 0.85, automasking: bool = True,
-                         noise_std: float = 1e-5, generator: torch.Generator | None = None) -> dict[str, torch.Tensor]:
+                         noise_std: float = 1e-5, generator: torch.Generator | None = None,
+                         pixel_weight: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
     """Monodepth2's multi-scale loss for one target frame (B, 3, H, W).
 
     ``warped[s][k]``: source k warped with the scale-s disparity upsampled to input resolution (B, 3, H, W),
@@ -100,7 +101,8 @@ def self_supervised_loss(target: torch.Tensor, warped: torch.Tensor | Sequence[S
     (K, B, 3, H, W)); ``disps[s]``: the network disparity at scale s (any resolution; the smoothness term compares
     it with the target resized to that resolution, weighted by 1 / 2^s). Photometric term per scale =
     mean(mu * min_k P(target, warped_k)) (ch. 4 eq. 4; mu = 1 without auto-masking). All scales and sources go
-    through one photometric-error call. Returns scalars: ``loss`` (mean over scales of photometric +
+    through one photometric-error call. ``pixel_weight`` (B, 1, H, W), optional, multiplies the photometric mask
+    (Manydepth: 0 where the cost volume is unreliable). Returns scalars: ``loss`` (mean over scales of photometric +
     w * smoothness / 2^s), ``photometric``, ``smoothness`` (means over scales, unweighted), ``automask_fraction``.
     """
     warped_t = warped if isinstance(warped, torch.Tensor) else torch.stack([torch.stack(list(w)) for w in warped])
@@ -122,6 +124,8 @@ def self_supervised_loss(target: torch.Tensor, warped: torch.Tensor | Sequence[S
         mask = automask(min_err, ident, noise_std, generator).to(min_err.dtype)
     else:
         mask = torch.ones_like(min_err)
+    if pixel_weight is not None:
+        mask = mask * pixel_weight.to(mask.dtype).repeat(n_scales, 1, 1, 1)
     photo = (mask * min_err).reshape(n_scales, -1).mean(1)
     total, smooth_sum = 0.0, 0.0
     for s, disp in enumerate(disps):
