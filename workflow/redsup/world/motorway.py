@@ -4,8 +4,9 @@ Cross-section (y = 0 on the median barrier): two carriageways of `lanes` lanes p
 ego vehicle's on the right (y < 0, driving +x), grass verges with guard rails, lighting poles on the
 median, trees and a few distant buildings. The road has the same grade and camber phenomena as the urban
 scenes, and the ego vehicle the same pitch/roll dynamics. Other vehicles drive at constant velocity
-relative to the road: their distance to the ego camera at the last frame (near/medium/far bins), lane
-(same/left/right) and relative velocity are drawn from the configured distributions.
+relative to the road; where they are and how fast they drive comes from the traffic model of
+`redsup.world.traffic` (headway queues per lane, a spatially correlated stream speed, driver deviations,
+lane changes), so the distance mix and the growth of the speed spread with distance are its consequences.
 """
 from __future__ import annotations
 
@@ -18,6 +19,7 @@ from .ego import EgoTrack, make_ego
 from .layout import FrameState, make_style, sample_colours, sample_sizes
 from .prims import KIND_BARRIER, KIND_BUILDING, KIND_CROWN, KIND_POLE, KIND_RAIL, KIND_TRUNK, Prims, car_prims
 from .road import Road, make_road
+from .traffic import headway_queue, lane_offset, stream_speed
 
 MEDIAN = 1.0     # |y| of the inner lane edge
 SHOULDER = 2.5
@@ -29,7 +31,7 @@ class Motorway:
     style: object
     ego: EgoTrack
     static: Prims
-    cars: dict        # track_id, size, colour, phase, pos0 (at t = 0), vel (world), lane_change
+    cars: dict        # track_id, size, colour, phase, pos0 (at t = 0), vel (world), dv, shift, z
     buildings: dict
     target: np.ndarray  # bool per car: drawn as an annotation target (others: background traffic)
 
@@ -122,52 +124,12 @@ def build_motorway(world_cfg: dict, ccfg: dict, dom: dict, rng: np.random.Genera
     cam_x = world_cfg["rig"]["camera_x"]
     T_end = (n_frames - 1) / fps
     t_rel = np.arange(n_frames) / fps - T_end
-    v_T = ego.v[-1]
-    others = [(ego.s + 1.3, ego.y[-1], 4.6)]
-    cars = {k: [] for k in ("size", "pos0", "vel", "target")}
-    bins = np.concatenate([[ccfg["min_distance"]], ccfg["distance_bins"], [ccfg["max_distance"]]])
-    mix = np.asarray(ccfg["distance_mix"], dtype=np.float64) / np.sum(ccfg["distance_mix"])
-    lane_names = ("same", "left", "right")
-    lane_p = np.array([ccfg["lane_mix"][k] for k in lane_names], dtype=np.float64)
-    n_target = 1 + rng.poisson(max(ccfg["vehicles_per_clip"] - 1.0, 0.0))
-    n_bg = rng.poisson(ccfg["background_vehicles"])
-    for j in range(n_target + n_bg):
-        target = j < n_target
-        size = sample_sizes(rng, 1, world_cfg["traffic"]["car_size"])[0]
-        for _ in range(30):
-            if target:
-                b = rng.choice(len(mix), p=mix)
-                z = rng.uniform(bins[b], bins[b + 1])
-                shift = {"same": 0, "left": -1, "right": 1}[lane_names[rng.choice(3, p=lane_p / lane_p.sum())]]
-            else:
-                z = rng.uniform(-25.0, ccfg["max_distance"] * 1.3)
-                shift = int(rng.integers(-ego_lane, lanes - ego_lane))
-            lane = ego_lane + shift
-            if not 0 <= lane < lanes:
-                continue
-            vz = rng.normal(0.0, ccfg["relative_speed_sigma"]) * velocity_scale
-            vx = rng.normal(0.0, ccfg["lateral_speed_sigma"]) * velocity_scale
-            if rng.random() < ccfg["lane_change_prob"]:
-                vx += ccfg["lane_change_speed"] * velocity_scale * rng.choice([-1.0, 1.0])
-            vel = np.array([max(v_T + vz, 3.0), -vx])       # world x, y (x right in camera = -y)
-            x_T = ego.s[-1] + cam_x + z + size[0] / 2
-            y_T = lane_centre(lane, lw) + rng.normal(0.0, 0.2)
-            track = x_T + vel[0] * t_rel
-            y_track = y_T + vel[1] * t_rel
-            if np.any(np.abs(y_track) < MEDIAN + 0.8) or np.any(np.abs(y_track) > MEDIAN + lanes * lw - 0.8):
-                continue
-            if not _free(track, y_T, size[0], others, t_rel):
-                continue
-            others.append((track, y_T, size[0]))
-            cars["size"].append(size)
-            cars["pos0"].append([track[0], y_track[0]])
-            cars["vel"].append(vel)
-            cars["target"].append(target)
-            break
+    cars = place_traffic(rng, ccfg, ego, ego_lane, world_cfg["traffic"]["car_size"], cam_x, t_rel, velocity_scale)
     n = len(cars["size"])
     table = {"track_id": np.arange(1, n + 1, dtype=np.int64), "size": np.asarray(cars["size"]).reshape(n, 3),
              "colour": sample_colours(rng, n, dom["palette"]["cars"]), "phase": rng.uniform(0, 100.0, n),
-             "pos0": np.asarray(cars["pos0"]).reshape(n, 2), "vel": np.asarray(cars["vel"]).reshape(n, 2)}
+             "pos0": np.asarray(cars["pos0"]).reshape(n, 2), "vel": np.asarray(cars["vel"]).reshape(n, 2),
+             **{k: np.asarray(cars[k], dtype=np.float64).reshape(n) for k in ("dv", "shift", "z")}}
     mw = world_cfg["road"]["marking_width"]
     lines = [[s * (MEDIAN + 0.3), mw, 0, 0] for s in (1, -1)]
     lines += [[s * (MEDIAN + lanes * lw), mw, 0, 0] for s in (1, -1)]
@@ -176,7 +138,7 @@ def build_motorway(world_cfg: dict, ccfg: dict, dom: dict, rng: np.random.Genera
     style = make_style(int(rng.integers(0, 2 ** 31)), dom, world_cfg["road"], lines, centres, [], hw, 0.0)
     buildings, bprims = _buildings(rng, road, x_lo, x_hi, hw, dom)
     static = Prims.concat([bprims, _scenery(rng, road, x_lo, x_hi, hw, dom)])
-    return Motorway(road, style, ego, static, table, buildings, np.asarray(cars["target"], dtype=bool))
+    return Motorway(road, style, ego, static, table, buildings, np.asarray(cars["target"], dtype=bool).reshape(n))
 
 
 def motorway_state(mw: Motorway, i: int) -> FrameState:
@@ -193,3 +155,61 @@ def motorway_state(mw: Motorway, i: int) -> FrameState:
     n = len(x)
     prims = Prims.concat([mw.static, car_prims(pos, rot, c["size"], np.arange(n))])
     return FrameState(prims, pos, rot, vel.reshape(n, 3), mw.ego.poses[i])
+
+
+def place_traffic(rng: np.random.Generator, ccfg: dict, ego: EgoTrack, ego_lane: int, size_cfg: dict,
+                  cam_x: float, t_rel: np.ndarray, velocity_scale: float) -> dict:
+    """The other vehicles of a clip (`redsup.world.traffic`): per lane a headway queue from behind the
+    camera to 1.3 x max_distance ahead, speeds from the stream model, lateral weaving and lane changes.
+    Positions are those at the last frame; a vehicle whose track would come within 4 m of an already placed
+    one (nearest first, the ego vehicle first of all) or leave the carriageway during the clip is dropped.
+    Returns lists size, pos0 (world x, y at t = 0), vel (world x, y), target (ahead within the annotated
+    distance range at the last frame), dv (relative longitudinal speed), shift (lane - ego lane), z (camera
+    z of the near face at the last frame)."""
+    tcfg = ccfg["traffic"]
+    lw, lanes = ccfg["lane_width"], ccfg["lanes"]
+    v_T = float(ego.v[-1])
+    ego_front = 1.3 + 4.6 / 2 - cam_x                     # camera z of the ego vehicle's front
+    stop = 1.3 * ccfg["max_distance"]
+    c_ego = float(lane_offset(ego_lane, lanes, tcfg["lane_speed_step"]))
+    queue = []                                            # (near-face z at T, lane)
+    for lane in range(lanes):
+        speed = v_T + float(lane_offset(lane, lanes, tcfg["lane_speed_step"])) - c_ego
+        start = ego_front if lane == ego_lane else -15.0
+        for z in headway_queue(speed, start, stop, tcfg, rng, leader_of_start=lane == ego_lane):
+            queue.append((float(z), lane))
+    queue.sort(key=lambda r: abs(r[0]))
+    n = len(queue)
+    z = np.array([q[0] for q in queue], dtype=np.float64)
+    lane = np.array([q[1] for q in queue], dtype=np.int64)
+    U = stream_speed(np.concatenate([[0.0], z]), tcfg["stream_sigma"], tcfg["stream_length"], rng)
+    e = rng.normal(0.0, tcfg["driver_sigma"], n + 1)
+    c = lane_offset(lane, lanes, tcfg["lane_speed_step"])
+    dv = velocity_scale * ((U[1:] - U[0]) + (c - c_ego) + (e[1:] - e[0]))
+    others = [(ego.s + 1.3, ego.y[-1], 4.6)]
+    cars = {k: [] for k in ("size", "pos0", "vel", "target", "dv", "shift", "z")}
+    for k in range(n):
+        size = sample_sizes(rng, 1, size_cfg)[0]
+        vy = rng.normal(0.0, tcfg["lateral_sigma"])
+        if rng.random() < tcfg["lane_change_prob"]:
+            towards = [d for d in (-1, 1) if 0 <= lane[k] + d < lanes]
+            direction = towards[rng.integers(len(towards))] if towards else 0
+            vy -= direction * tcfg["lane_change_speed"]      # lane + 1 is farther from the median: y more negative
+        vel = np.array([max(v_T + dv[k], 3.0), velocity_scale * vy])
+        x_T = ego.s[-1] + cam_x + z[k] + size[0] / 2
+        y_T = lane_centre(int(lane[k]), lw) + rng.normal(0.0, 0.2)
+        track = x_T + vel[0] * t_rel
+        y_track = y_T + vel[1] * t_rel
+        if np.any(np.abs(y_track) < MEDIAN + 0.8) or np.any(np.abs(y_track) > MEDIAN + lanes * lw - 0.8):
+            continue
+        if not _free(track, y_T, size[0], others, t_rel):
+            continue
+        others.append((track, y_T, size[0]))
+        cars["size"].append(size)
+        cars["pos0"].append([track[0], y_track[0]])
+        cars["vel"].append(vel)
+        cars["target"].append(bool(ccfg["min_distance"] <= z[k] <= ccfg["max_distance"]))
+        cars["dv"].append(float(dv[k]))
+        cars["shift"].append(int(lane[k] - ego_lane))
+        cars["z"].append(float(z[k]))
+    return cars
