@@ -1,9 +1,11 @@
 """The fixed template car ("average car", McCraith ch. 6 S_0 / ch. 7 M) and its distance field.
 
 The template is a two-box body (lower body + cabin) of 3.9 x 1.6 x 1.5 m sampled as surface points on a
-regular spacing, origin at the centre of its tight bounding box, x forward, z up. Default proportions
-follow the embedded world's car family (body 56 % of the height, cabin half the length, centred 7 % of
-the length behind the middle, 88 % of the width), i.e. a typical car, not any particular instance.
+regular spacing, origin at the centre of its tight bounding box, x forward, z up: one fixed "average car"
+(the thesis' weak prior; KITTI's mean Car is 3.88 x 1.63 x 1.53 m) with generic sedan proportions (body
+56 % of the height, cabin half the length, centred 7 % of the length behind the middle, 88 % of the width).
+It is the methods' prior, not read from the world generator: the world's cars are a mixture of body styles
+and sizes (redsup.world.prims.STYLES, world.traffic.car_size) that the template matches only on average.
 
 The one-sided Chamfer term min_{X' in S} ||X - X'|| is precomputed once as the exact distance from every
 node of a regular 3D grid around the template to the nearest surface point (scipy cKDTree), so posing the

@@ -9,7 +9,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import noise
-from .prims import BODY_HEIGHT, KIND_CABIN, glass_mask
+from .prims import KIND_CABIN, body_height, glass_mask
 from .textures import BUILDING, CAR, Style, surface
 
 WINDOW_SILL = 0.9
@@ -90,6 +90,11 @@ def building(local: np.ndarray, face: np.ndarray, half: np.ndarray, rows: np.nda
     return out
 
 
+def car_styles(table: dict, rows: np.ndarray) -> np.ndarray | None:
+    """Body-style indices of car-table rows (None: a table without styles, all sedans)."""
+    return table["style"][rows] if "style" in table else None
+
+
 def car(p: np.ndarray, face: np.ndarray, kind: np.ndarray, rows: np.ndarray, table: dict, style: Style,
         fp: np.ndarray, local: np.ndarray, half: np.ndarray):
     """Material of car bodies and cabins (`p`: hit point in the car frame, origin on the ground at the
@@ -98,7 +103,7 @@ def car(p: np.ndarray, face: np.ndarray, kind: np.ndarray, rows: np.ndarray, tab
     out.label[:] = CAR
     size = table["size"][rows]
     L, W, H = size[:, 0], size[:, 1], size[:, 2]
-    hb = BODY_HEIGHT * H
+    hb = body_height(size, car_styles(table, rows))
     x, y, z = p[:, 0], p[:, 1], p[:, 2]
     paint = table["colour"][rows].astype(np.float32)
     phase = table["phase"][rows]
@@ -165,7 +170,7 @@ def car_reflectance(p: np.ndarray, face: np.ndarray, kind: np.ndarray, rows: np.
     """LiDAR reflectance of car points (the same layout as `car`, without the colour work): paint by
     brightness, retro-reflective lamps, bright number plates, dark glass."""
     size = table["size"][rows]
-    W, hb = size[:, 1], BODY_HEIGHT * size[:, 2]
+    W, hb = size[:, 1], body_height(size, car_styles(table, rows))
     ay, z = np.abs(p[:, 1]), p[:, 2]
     refl = 0.25 + 0.35 * table["colour"][rows].mean(axis=1)
     ends = (kind != KIND_CABIN) & (face // 2 == 0)

@@ -9,7 +9,7 @@ import numpy as np
 
 from .common import heading_frames
 from .ego import EgoTrack, make_ego
-from .prims import KIND_BUILDING, KIND_CROWN, KIND_POLE, KIND_TRUNK, Prims, car_prims
+from .prims import KIND_BUILDING, KIND_CROWN, KIND_POLE, KIND_TRUNK, STYLE_INDEX, Prims, car_prims
 from .road import Road, make_road
 from .textures import Style
 
@@ -36,7 +36,7 @@ class World:
     style: Style
     ego: EgoTrack
     static: Prims
-    cars: dict           # track_id, size, colour, phase, parked, pos, rot (parked cars' fixed pose)
+    cars: dict           # track_id, size, style, colour, phase, parked, pos, rot (parked cars' fixed pose)
     buildings: dict
     movers: Movers
 
@@ -50,11 +50,26 @@ class FrameState:
     T_world_vehicle: np.ndarray
 
 
+def sample_cars(rng: np.random.Generator, n: int, size_cfg: dict) -> tuple[np.ndarray, np.ndarray]:
+    """(sizes (n, 3) l, w, h in m, body styles (n,) indices into prims.STYLES) of n cars: a body style drawn
+    by its share, then each dimension from that style's normal (mean, std), clipped at 3 std. The spread of
+    the population is that of the mixture of styles (world.traffic.car_size)."""
+    names = list(size_cfg)
+    unknown = [k for k in names if k not in STYLE_INDEX]
+    if unknown:
+        raise ValueError(f"world.traffic.car_size: unknown body style(s) {unknown} (known: {list(STYLE_INDEX)})")
+    share = np.array([size_cfg[k]["share"] for k in names], dtype=np.float64)
+    pick = rng.choice(len(names), size=n, p=share / share.sum())
+    mean = np.array([[size_cfg[k][d][0] for d in ("length", "width", "height")] for k in names])
+    std = np.array([[size_cfg[k][d][1] for d in ("length", "width", "height")] for k in names])
+    z = np.clip(rng.standard_normal((n, 3)), -3.0, 3.0)
+    sizes = mean[pick] + std[pick] * z
+    return sizes, np.array([STYLE_INDEX[names[j]] for j in pick], dtype=np.int64).reshape(n)
+
+
 def sample_sizes(rng: np.random.Generator, n: int, size_cfg: dict) -> np.ndarray:
-    mean = np.array([size_cfg["length"], size_cfg["width"], size_cfg["height"]])
-    spread = size_cfg["spread"]
-    factor = np.clip(rng.normal(1.0, spread, (n, 3)), 1 - 3 * spread, 1 + 3 * spread)
-    return mean * factor
+    """(n, 3) sizes of `sample_cars` (for callers that draw no body style: they render as sedans)."""
+    return sample_cars(rng, n, size_cfg)[0]
 
 
 def sample_colours(rng: np.random.Generator, n: int, palette: list) -> np.ndarray:
@@ -63,18 +78,19 @@ def sample_colours(rng: np.random.Generator, n: int, palette: list) -> np.ndarra
 
 
 def _parked_rows(rng, x_lo, x_hi, y_side, heading, density, close_prob, avoid, size_cfg):
-    xs, sizes, yaws = [], [], []
+    xs, sizes, yaws, styles = [], [], [], []
     x = x_lo
     while x < x_hi:
         stretch = rng.uniform(10.0, 60.0)
         if rng.random() < density:
             end = x + stretch
             while x < end:
-                s = sample_sizes(rng, 1, size_cfg)[0]
+                s, st = (a[0] for a in sample_cars(rng, 1, size_cfg))
                 c = x + s[0] / 2
                 if np.all(np.abs(avoid - c) > 9.0):
                     xs.append(c)
                     sizes.append(s)
+                    styles.append(st)
                     flip = np.pi if rng.random() < 0.1 else 0.0
                     yaws.append(heading + flip + rng.normal(0.0, 0.02))
                 gap = rng.uniform(0.3, 1.0) if rng.random() < close_prob else rng.uniform(1.0, 4.0)
@@ -83,7 +99,7 @@ def _parked_rows(rng, x_lo, x_hi, y_side, heading, density, close_prob, avoid, s
             x += stretch
     n = len(xs)
     ys = y_side + rng.normal(0.0, 0.1, n)
-    return np.array(xs), ys, np.array(yaws), np.array(sizes).reshape(n, 3)
+    return np.array(xs), ys, np.array(yaws), np.array(sizes).reshape(n, 3), np.array(styles, np.int64)
 
 
 def _buildings(rng, road, x_lo, x_hi, side, front, bcfg, palette, n_existing):
@@ -196,11 +212,12 @@ def build_world(cfg: dict, dom: dict, rng: np.random.Generator, n_frames: int) -
     py = np.concatenate([p[1] for p in parked])
     pyaw = np.concatenate([p[2] for p in parked])
     psize = np.concatenate([p[3] for p in parked])
+    pstyle = np.concatenate([p[4] for p in parked])
     n_parked = len(px)
     # moving cars: followers of the ego (ahead and behind) in its lane, oncoming in the other lane
     n_lead = int(rng.integers(tc["lead_cars"][0], tc["lead_cars"][1] + 1))
     n_follow = int(rng.integers(tc["following_cars"][0], tc["following_cars"][1] + 1))
-    msize = sample_sizes(rng, n_lead + n_follow, tc["car_size"])
+    msize, mstyle = sample_cars(rng, n_lead + n_follow, tc["car_size"])
     gaps, ahead = [], 3.9 + rng.uniform(6.0, 25.0)
     for i in range(n_lead):
         gaps.append(ahead + msize[i, 0] / 2)
@@ -218,7 +235,7 @@ def build_world(cfg: dict, dom: dict, rng: np.random.Generator, n_frames: int) -
         keep = np.concatenate([[True], np.diff(on_x) > 10.0])
         on_x = on_x[keep]
         n_on = len(on_x)
-    on_size = sample_sizes(rng, n_on, tc["car_size"])
+    on_size, on_style = sample_cars(rng, n_on, tc["car_size"])
     n_follow_total = n_lead + n_follow
     n_move = n_follow_total + n_on
     amp = rng.uniform(0.3, 2.0, n_move)
@@ -236,6 +253,7 @@ def build_world(cfg: dict, dom: dict, rng: np.random.Generator, n_frames: int) -
     pos = np.stack([px, py, road.height(px, py)], axis=-1) if n_parked else np.zeros((0, 3))
     prot = heading_frames(pyaw, road.normal(px)) if n_parked else np.zeros((0, 3, 3))
     cars = {"track_id": np.arange(1, n_cars + 1, dtype=np.int64), "size": sizes,
+            "style": np.concatenate([pstyle, mstyle, on_style]).astype(np.int64),
             "colour": sample_colours(rng, n_cars, dom["palette"]["cars"]),
             "phase": rng.uniform(0, 100.0, n_cars), "parked": np.arange(n_cars) < n_parked,
             "pos": pos, "rot": prot}
@@ -251,7 +269,7 @@ def build_world(cfg: dict, dom: dict, rng: np.random.Generator, n_frames: int) -
     bprims = Prims.boxes(buildings["center"], np.repeat(np.eye(3)[None], nb, 0), buildings["half"],
                          KIND_BUILDING, np.arange(nb))
     static = Prims.concat([bprims, _props(rng, road, x_lo, x_hi, hw, sw, dom),
-                           car_prims(pos, prot, psize, np.arange(n_parked))])
+                           car_prims(pos, prot, psize, np.arange(n_parked), pstyle)])
     return World(road, style, ego, static, cars, buildings, movers)
 
 
@@ -282,7 +300,7 @@ def frame_state(world: World, i: int, reach: float) -> FrameState:
     sx = np.abs(st.sph_center[:, 0] - s_e) - st.sph_radius < reach
     pos, rot, vel = mover_state(world, i)
     rows = world.movers.row
-    dyn = car_prims(pos, rot, world.cars["size"][rows], rows)
+    dyn = car_prims(pos, rot, world.cars["size"][rows], rows, world.cars["style"][rows])
     n = len(world.cars["size"])
     car_pos = np.zeros((n, 3))
     car_rot = np.zeros((n, 3, 3))
