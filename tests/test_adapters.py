@@ -323,6 +323,8 @@ def test_scene_folder_lens_focal_and_depth_maps_as_virtual_lidar(tmp_path):
 def test_tusimple_split_in_canonical_clip_shape(tmp_path):
     root = tmp_path / "tusimple_test"
     (root / "clips" / "3" / "imgs").mkdir(parents=True)
+    for k in range(1, 41):  # a clip's 40 frames (linked, not decoded: empty files do)
+        (root / "clips" / "3" / "imgs" / f"{k:03d}.jpg").write_bytes(b"")
     (root / "calibration.txt").write_text("Intrinsic matrix:\n714.1526    0.      675.5754\n   0.      710.3725  "
                                           "376.2563\n   0.        0.        1.    \n\nCamera Height:\n\n1.80m\n")
     # a test clip: the indication file has boxes only ([top, left, bottom, right]); the gt file has the rest

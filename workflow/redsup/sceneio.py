@@ -108,8 +108,37 @@ def read_depth_png(path: str | Path) -> np.ndarray:
     return read_label_png(path).astype(np.float32) / 256.0
 
 
+RIGID_TOLERANCE = 1e-4  # max |R^T R - I|: KITTI's printed rotations are orthonormal to ~1e-6
+
+
+def rigid_problem(T: np.ndarray) -> str | None:
+    """Why a 4x4 (or 3x4) matrix is no rigid transform (non-finite, rotation not orthonormal with det +1,
+    last row not 0 0 0 1), or None."""
+    T = np.asarray(T, dtype=np.float64)
+    if not np.isfinite(T).all():
+        return "non-finite values"
+    R = T[:3, :3]
+    err = float(np.abs(R.T @ R - np.eye(3)).max())
+    det = float(np.linalg.det(R))
+    if err > RIGID_TOLERANCE or det <= 0:
+        return (f"not a rotation (|R^T R - I| = {err:.2g}, tolerance {RIGID_TOLERANCE:g}; det R = {det:.6g}, "
+                f"need +1)")
+    if T.shape[0] == 4 and not np.allclose(T[3], [0, 0, 0, 1]):
+        return f"last row {T[3].tolist()} is not [0, 0, 0, 1]"
+    return None
+
+
+def check_poses(poses: np.ndarray, where: str | Path) -> np.ndarray:
+    """`poses` (T, 4, 4) unchanged; SceneError naming `where` and the first bad line (1-based)."""
+    for i, T in enumerate(np.asarray(poses)):
+        problem = rigid_problem(T)
+        if problem:
+            raise SceneError(f"{where}: line {i + 1}: pose {problem}")
+    return poses
+
+
 def read_poses(path: str | Path) -> np.ndarray:
-    """(T, 4, 4) T_world_vehicle from 12 numbers per line."""
+    """(T, 4, 4) T_world_vehicle from 12 numbers per line; every pose finite and rigid."""
     path = Path(path)
     try:
         values = np.loadtxt(path, ndmin=2)
@@ -121,7 +150,7 @@ def read_poses(path: str | Path) -> np.ndarray:
         raise SceneError(f"{path}: expected 12 numbers per line (3x4 pose), got {values.shape[1]}")
     poses = np.tile(np.eye(4), (len(values), 1, 1))
     poses[:, :3, :] = values.reshape(-1, 3, 4)
-    return poses
+    return check_poses(poses, path)
 
 
 def read_extrinsics(path: str | Path) -> dict[str, np.ndarray]:
@@ -132,6 +161,9 @@ def read_extrinsics(path: str | Path) -> dict[str, np.ndarray]:
         T = np.asarray(matrix, dtype=np.float64)
         if T.shape != (4, 4):
             raise SceneError(f"{path}: extrinsics of '{name}' have shape {T.shape}, expected 4x4")
+        problem = rigid_problem(T)
+        if problem:
+            raise SceneError(f"{path}: extrinsics of '{name}': {problem}")
         out[name] = T
     return out
 

@@ -96,6 +96,28 @@ def image_size(path: str | Path) -> tuple[int, int]:
     return int(image.shape[1]), int(image.shape[0])
 
 
+PNG_END = b"\x00\x00\x00\x00IEND\xaeB`\x82"  # the IEND chunk every complete PNG ends with
+
+
+def check_png_complete(path: str | Path) -> None:
+    """AdapterError unless the PNG ends with its IEND chunk (a cut download or copy loses it). Linked images
+    are not decoded at adaptation, so this cheap check names the source instead of a later job the link."""
+    path = Path(path)
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(8)
+            fh.seek(0, os.SEEK_END)
+            size = fh.tell()
+            fh.seek(max(0, size - len(PNG_END)))
+            tail = fh.read()
+    except FileNotFoundError as exc:
+        raise AdapterError(f"{path}: image missing") from exc
+    if head != b"\x89PNG\r\n\x1a\n":
+        raise AdapterError(f"{path}: not a PNG (no PNG signature)")
+    if tail != PNG_END:
+        raise AdapterError(f"{path}: truncated PNG ({size} bytes, no IEND chunk at the end)")
+
+
 def mirrored(root: str | Path, relative: Path, suffix: str) -> Path:
     """The file beside-layout convention for precomputed per-image inputs: `root` / the image's path
     relative to the dataset root, with its extension replaced by `suffix`."""
@@ -140,7 +162,7 @@ class SceneWriter:
         self.write_json("extrinsics.json", {k: np.asarray(v, dtype=float).tolist() for k, v in extrinsics.items()})
 
     def write_poses(self, poses: np.ndarray) -> None:
-        poses = np.asarray(poses, dtype=np.float64)
+        poses = sceneio.check_poses(np.asarray(poses, dtype=np.float64), f"ego poses of {self.out}")
         np.savetxt(self.path("ego_poses.txt"), poses[:, :3, :].reshape(len(poses), 12), fmt="%.12g")
 
     def write_intrinsics(self, camera: str, K: np.ndarray, size: tuple[int, int]) -> None:
@@ -159,6 +181,7 @@ class SceneWriter:
     def place_image(self, source: Path, relative: str) -> None:
         """A PNG source is placed as is; other formats are decoded and written as PNG."""
         if source.suffix.lower() == ".png":
+            check_png_complete(source)
             self.place(source, relative)
             return
         image = cv2.imread(str(source), cv2.IMREAD_COLOR)

@@ -16,6 +16,7 @@ pixel for pixel (within prepare.depth_range); `exact` writes P_rect's own princi
 """
 from __future__ import annotations
 
+import datetime
 import functools
 import math
 from pathlib import Path
@@ -94,6 +95,9 @@ def oxts_poses(paths: list[Path]) -> np.ndarray:
             raise AdapterError(f"{p}: missing or malformed OXTS packet ({exc})") from exc
         if values.size < 6:
             raise AdapterError(f"{p}: an OXTS packet has 30 numbers, found {values.size}")
+        if not np.isfinite(values[:6]).all():
+            raise AdapterError(f"{p}: non-finite position or orientation in the OXTS packet "
+                               f"(lat lon alt roll pitch yaw = {values[:6].tolist()})")
         rows.append(values[:6])
     rows = np.array(rows)
     scale = math.cos(math.radians(rows[0, 0]))
@@ -110,6 +114,33 @@ def oxts_poses(paths: list[Path]) -> np.ndarray:
     poses = np.array(poses)
     poses[:, :3, 3] -= poses[0, :3, 3]
     return poses
+
+
+# ---------------------------------------------------------------------------------------- timestamps
+def check_timestamps(path: Path, first: int, count: int) -> None:
+    """A sensor's `timestamps.txt` (one `YYYY-MM-DD HH:MM:SS.fffffffff` per frame), if present, must have a
+    line for each of the scene's frames first..first+count-1, strictly increasing: a repeated or backward
+    time means duplicated or reordered frames, which the 10 fps frame clock would silently mistime."""
+    if not path.is_file():
+        return
+    lines = path.read_text().splitlines()
+    if len(lines) < first + count:
+        raise AdapterError(f"{path}: {len(lines)} timestamps, the scene needs lines {first + 1}..{first + count}")
+    previous = None
+    for n in range(first, first + count):
+        text = lines[n].strip()
+        try:
+            day, clock = text.split()
+            whole, _, frac = clock.partition(".")
+            t = datetime.datetime.strptime(f"{day} {whole}", "%Y-%m-%d %H:%M:%S").replace(
+                tzinfo=datetime.timezone.utc).timestamp() + float(f"0.{frac or 0}")
+        except ValueError as exc:
+            raise AdapterError(f"{path}: line {n + 1} is not a timestamp (YYYY-MM-DD HH:MM:SS.fff): {text!r}") from exc
+        if previous is not None and t == previous:
+            raise AdapterError(f"{path}: line {n + 1} repeats the timestamp of line {n} ({text}): duplicated frame")
+        if previous is not None and t < previous:
+            raise AdapterError(f"{path}: line {n + 1} ({text}) is earlier than line {n}: frames out of order")
+        previous = t
 
 
 # -------------------------------------------------------------------------------------------- labels
@@ -312,6 +343,8 @@ def adapt_raw(dataset: str, spec: dict, scene: str, out_dir: str | Path, seed: i
               for c in cameras}
     sweeps = _check_frames(drive_dir / "velodyne_points" / "data", stems, ".bin", "velodyne sweeps")
     _check_sweeps(sweeps)
+    for folder in [*(f"image_{RAW_CAMERAS[c]}" for c in cameras), "velodyne_points", "oxts"]:
+        check_timestamps(drive_dir / folder / "timestamps.txt", entry["start"], n)
     oxts_dir = drive_dir / "oxts" / "data"
     if oxts_dir.is_dir():
         T_world_imu = oxts_poses(_check_frames(oxts_dir, stems, ".txt", "OXTS packets"))

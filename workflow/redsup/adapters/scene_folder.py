@@ -164,6 +164,9 @@ def adapt(dataset: str, spec: dict, scene: str, out_dir: str | Path, seed: int =
     frames = {c: list_frames(src / cfg["folder"], IMAGE_EXTS) for c, cfg in cams.items()}
     n = len(next(iter(frames.values())))
     for c, paths in frames.items():
+        if not paths:
+            raise AdapterError(f"{src / cams[c]['folder']}: no images ({', '.join(IMAGE_EXTS)}): empty camera "
+                               f"folder")
         if len(paths) != n or n == 0:
             raise AdapterError(f"{src / cams[c]['folder']}: {len(paths)} images, but "
                                f"{src / next(iter(cams.values()))['folder']} has {n} (need one per frame)")

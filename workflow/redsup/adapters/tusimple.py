@@ -20,6 +20,19 @@ from redsup.adapters.common import AdapterError
 from redsup.sceneio import read_json
 
 NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
+CLIP_FRAMES = 40  # every TuSimple velocity clip: imgs/001 ... 040 at 20 fps, annotated in the last
+
+
+def check_clip_frames(imgs: Path, n_frames: int = CLIP_FRAMES) -> None:
+    """AdapterError naming `imgs` and the missing frame numbers unless 001..n_frames (.jpg or .png) exist."""
+    if not imgs.is_dir():
+        raise AdapterError(f"{imgs}: missing")
+    have = {p.stem for p in imgs.iterdir() if p.suffix.lower() in (".jpg", ".png")}
+    missing = [f"{k:03d}" for k in range(1, n_frames + 1) if f"{k:03d}" not in have]
+    if missing:
+        shown = ", ".join(missing[:8]) + (f" and {len(missing) - 8} more" if len(missing) > 8 else "")
+        raise AdapterError(f"{imgs}: {len(missing)} of {n_frames} frames missing ({shown}); a TuSimple clip has "
+                           f"{n_frames} (001.jpg ... {n_frames:03d}.jpg)")
 
 
 def read_calibration(path: str | Path) -> dict:
@@ -123,8 +136,7 @@ def adapt_clips(source: dict, split: str, out_dir: str | Path) -> dict:
             f"{calibration['height']:.6f}\n")
         for clip in sorted(dirs, key=lambda p: int(p.name)):
             ann_path = clip / "annotation.json"
-            if not (clip / "imgs").is_dir():
-                raise AdapterError(f"{clip / 'imgs'}: missing")
+            check_clip_frames(clip / "imgs")
             annotations = read_json(ann_path, error=AdapterError)
             vehicles = _vehicles(annotations, str(ann_path), None if gt is None else gt.get(int(clip.name), []))
             n_vehicles += len(vehicles)
