@@ -9,6 +9,9 @@ Per (input size, base width): the median over repeats of
 - an adaptation step at batch 1 (vanilla SGD on the depth + pose encoders, BatchNorm frozen), as in
   McCraith ch. 4 (the sequential / instance-wise speed ratio follows: 5 vs 50 steps per frame);
 - inference (depth network only) at batch 1;
+- the achieved GFLOP/s of the training step (its FLOPs counted once with ``torch.utils.flop_counter``:
+  convolutions and matmuls, forward and backward) beside the measured fp32 sgemm peak of the same threads
+  (a 1024x1024 matmul), and their ratio: how well a training step uses the cores;
 - the two test-time scenarios of ch. 4 Table 6 end to end on a short synthetic video (``--frames`` frames):
   seconds per frame of instance-wise adaptation (``--instance-steps`` steps, weights reset per frame) and of
   sequential adaptation (``--sequential-steps`` steps, weights carried over), and their ratio.
@@ -33,6 +36,21 @@ def _batch(b: int, h: int, w: int) -> dict:
             "sources": {"prev": torch.rand(b, 3, h, w), "next": torch.rand(b, 3, h, w)}}
 
 
+def sgemm_gflops(n: int = 1024, repeats: int = 5) -> float:
+    """Measured fp32 matmul throughput (GFLOP/s) at the current thread count: the peak to compare with."""
+    a, b = torch.rand(n, n), torch.rand(n, n)
+    return 2 * n ** 3 / median_time(lambda: a @ b, repeats, warmup=1) / 1e9
+
+
+def step_flops(fn) -> int:
+    """FLOPs of one call of ``fn`` (convolutions and matmuls, forward and backward)."""
+    from torch.utils.flop_counter import FlopCounterMode
+
+    with FlopCounterMode(display=False) as counter:
+        fn()
+    return counter.get_total_flops()
+
+
 def bench(h: int, w: int, width: int, batch: int, repeats: int) -> dict:
     torch.manual_seed(0)
     models = networks.build_models(base_channels=width)
@@ -40,6 +58,7 @@ def bench(h: int, w: int, width: int, batch: int, repeats: int) -> dict:
     optimizer, _ = pipeline.make_optimizer(models)
     train_batch = _batch(batch, h, w)
     models.train()
+    flops = step_flops(lambda: pipeline.train_step(models, optimizer, train_batch))
     train_s = median_time(lambda: pipeline.train_step(models, optimizer, train_batch), repeats)
 
     test_batch = _batch(1, h, w)
@@ -54,7 +73,8 @@ def bench(h: int, w: int, width: int, batch: int, repeats: int) -> dict:
             pipeline.predict_depth(models, test_batch["target"])
     infer_s = median_time(infer, repeats)
     return {"size": f"{w}x{h}", "width": width, "params_M": n_params / 1e6, "batch": batch,
-            "train_step_s": train_s, "train_img_per_s": batch / train_s, "adapt_step_s": adapt_s,
+            "train_step_s": train_s, "train_img_per_s": batch / train_s, "train_gflop": flops / 1e9,
+            "train_gflops": flops / train_s / 1e9, "adapt_step_s": adapt_s,
             "infer_s": infer_s, "seq5_s": infer_s + 5 * adapt_s, "inst50_s": infer_s + 50 * adapt_s}
 
 
@@ -92,14 +112,17 @@ def main() -> None:
     parser.add_argument("--sequential-steps", type=int, default=5)
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
-    print(f"torch {torch.__version__}, {args.threads} threads, batch {args.batch}, median of {args.repeats}")
-    header = ("size", "width", "params_M", "train_step_s", "train_img_per_s", "adapt_step_s", "infer_s",
-              "seq5_s", "inst50_s")
+    peak = sgemm_gflops()
+    print(f"torch {torch.__version__}, {args.threads} threads, batch {args.batch}, median of {args.repeats}; "
+          f"fp32 sgemm peak {peak:.1f} GFLOP/s")
+    header = ("size", "width", "params_M", "train_step_s", "train_img_per_s", "train_gflop", "train_gflops",
+              "of_peak", "adapt_step_s", "infer_s", "seq5_s", "inst50_s")
     print(" | ".join(header))
     for size in args.sizes:
         w, h = (int(v) for v in size.lower().split("x"))
         for width in args.widths:
             r = bench(h, w, width, args.batch, args.repeats)
+            r["of_peak"] = r["train_gflops"] / peak
             print(" | ".join(f"{r[k]:.3f}" if isinstance(r[k], float) else str(r[k]) for k in header), flush=True)
     if args.frames >= 3:
         header = ("size", "width", "instance_s_per_frame", "sequential_s_per_frame", "speed_ratio")
