@@ -5,8 +5,16 @@ from config (`coco`: generic, `cityscapes`: driving domain, ch. 6 Table III):
 - misses: probability rising as the visible pixel count and the visible fraction fall;
 - merged neighbours: touching / overlapping detected instances merged into one mask;
 - boundary errors: a random per-mask dilation (> 0) or erosion (< 0) plus ragged edge pixels;
-- false positives: blobs on background labels (facades, vegetation, poles) with low scores;
-- a confidence score falling with mask quality (IoU of the faulty mask with its main instance).
+- false positives: blobs on background labels (facades, vegetation, poles), scored like detections with a
+  lower logit offset;
+- a confidence score that never sees the true instance: a logistic function of what a detector can know,
+  the detected mask's size and its instance's visible fraction, and of a latent per-detection quality ``u``
+  (how clearly the network sees the object), plus score noise. The same latent scales the mask's boundary
+  faults (``mask_quality_coupling``), so the score correlates with the mask's true IoU without being computed
+  from it (see ``score_of``). Measured on rendered kitti_like training scenes (tests/test_detection_score.py):
+  Spearman rank correlation between score and the best IoU with a ground-truth car 0.69 (coco) / 0.71
+  (cityscapes) over all output detections, false positives included (6 scenes x 4 frames); detections
+  scoring >= 0.8 have IoU >= 0.5 in 96-100 % of cases, those in 0.4-0.6 in 45-67 %.
 Pixel-valued settings are given at `reference_height` and scaled with the image height. Deterministic
 given the seed: every frame draws from its own stream `SeedSequence([seed, frame])`.
 """
@@ -108,15 +116,28 @@ def merge_groups(n: int, pairs: list[tuple[int, int]], merge_prob: float,
     return sorted(groups.values())
 
 
-def mask_iou(a: np.ndarray, b: np.ndarray) -> float:
-    union = np.count_nonzero(a | b)
-    return float(np.count_nonzero(a & b) / union) if union else 0.0
+def score_of(visible_px: float, visible_fraction: float, latent: float, level: dict, rng: np.random.Generator,
+             scale: float = 1.0, offset: float = 0.0) -> float:
+    """Confidence of one detection: sigmoid(logit) with
+
+        logit = score_bias + offset + score_size_gain * log2(px / (score_size_px * scale^2))
+                + score_visibility_gain * (visible_fraction - 1) + score_latent_gain * latent + N(0, score_noise)
+
+    (px: the detected mask's pixels; ``offset``: ``fp_score_offset`` for false positives). Nothing here
+    depends on the ground-truth mask; clipped to [0.001, 0.999]."""
+    size_px = max(level["score_size_px"] * scale ** 2, 1e-9)
+    logit = (level["score_bias"] + offset + level["score_size_gain"] * np.log2(max(visible_px, 1.0) / size_px)
+             + level["score_visibility_gain"] * (min(max(visible_fraction, 0.0), 1.0) - 1.0)
+             + level["score_latent_gain"] * latent)
+    if level["score_noise"] > 0:
+        logit += rng.normal(0.0, level["score_noise"])
+    return float(np.clip(1.0 / (1.0 + np.exp(-logit)), 0.001, 0.999))
 
 
-def score_of(quality: float, level: dict, rng: np.random.Generator) -> float:
-    """Confidence falling linearly with mask quality (IoU), plus noise, clipped to [0.01, 0.999]."""
-    raw = level["score_max"] - level["score_slope"] * (1.0 - quality) + rng.normal(0.0, level["score_noise"])
-    return float(np.clip(raw, 0.01, 0.999))
+def fault_scale(latent: float, coupling: float) -> float:
+    """Factor on a detection's boundary faults from its latent quality: exp(-c u - c^2 / 2), mean 1 over
+    u ~ N(0, 1), smaller for a clearly seen object (u > 0)."""
+    return float(np.exp(-coupling * latent - 0.5 * coupling * coupling))
 
 
 def false_positive_masks(instance: np.ndarray, semantic: np.ndarray | None, level: dict,
@@ -173,22 +194,25 @@ def simulate_frame(instance: np.ndarray, semantic: np.ndarray | None, objects: l
         members = [kept[g] for g in group]
         union = np.logical_or.reduce([masks[i] for i in members])
         main = max(members, key=lambda i: np.count_nonzero(masks[i]))
-        offset = int(np.round(rng.normal(level["boundary_mean_px"], level["boundary_std_px"]) * scale))
-        mask = perturb_boundary(union, offset, level["edge_flip"], rng)
+        latent = float(rng.standard_normal())
+        fault = fault_scale(latent, level["mask_quality_coupling"])
+        offset = int(np.round(rng.normal(level["boundary_mean_px"], level["boundary_std_px"]) * fault * scale))
+        mask = perturb_boundary(union, offset, min(level["edge_flip"] * fault, 1.0), rng)
         if not mask.any():
             counts["eroded_away"] += 1
             continue
         kind = KIND_MERGED if len(members) > 1 else KIND_SINGLE
         counts["merged_groups"] += kind == KIND_MERGED
-        detections.append({"mask": mask, "score": score_of(mask_iou(mask, masks[main]), level, rng),
-                           "kind": kind, "members": [objects[i]["track"] for i in members]})
-    lo, hi = level["fp_score"]
+        score = score_of(np.count_nonzero(mask), objects[main]["visible_fraction"], latent, level, rng, scale)
+        detections.append({"mask": mask, "score": score, "kind": kind,
+                           "members": [objects[i]["track"] for i in members]})
     for blob in false_positive_masks(instance, semantic, level, rng, scale):
         mask = perturb_boundary(blob, 0, level["edge_flip"], rng)
         if mask.any():
             counts["false_positive"] += 1
-            detections.append({"mask": mask, "score": float(rng.uniform(lo, hi)),
-                               "kind": KIND_FALSE_POSITIVE, "members": []})
+            score = score_of(np.count_nonzero(mask), 1.0, float(rng.standard_normal()), level, rng, scale,
+                             offset=level["fp_score_offset"])
+            detections.append({"mask": mask, "score": score, "kind": KIND_FALSE_POSITIVE, "members": []})
     return detections, counts
 
 
