@@ -12,7 +12,8 @@ from redsup.fileio import write_text_atomic  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
 
 sm = snakemake  # noqa: F821
-torch.set_num_threads(sm.threads)
+from redsup.determinism import configure as deterministic_torch  # noqa: E402
+deterministic_torch(sm.threads)  # the rule's threads and deterministic kernels: same seed -> same bits
 cfg = sm.config["depth"]
 spec = plan.spec_of(sm.params.run)
 tables = list(sm.params.run["tables"])

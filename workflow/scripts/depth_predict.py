@@ -14,7 +14,8 @@ from redsup.fileio import save_npz_atomic  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
 
 sm = snakemake  # noqa: F821
-torch.set_num_threads(sm.threads)
+from redsup.determinism import configure as deterministic_torch  # noqa: E402
+deterministic_torch(sm.threads)  # the rule's threads and deterministic kernels: same seed -> same bits
 dev = sm.config["depth"]["device"]
 device = dev if dev != "auto" else ("cuda" if torch.cuda.is_available() else "cpu")
 name = f"{sm.wildcards.dataset}/{sm.wildcards.mode}/{sm.wildcards.scene}"

@@ -14,7 +14,8 @@ from redsup.depth.experiments import loss_settings  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
 
 sm = snakemake  # noqa: F821
-torch.set_num_threads(sm.threads)
+from redsup.determinism import configure as deterministic_torch  # noqa: E402
+deterministic_torch(sm.threads)  # the rule's threads and deterministic kernels: same seed -> same bits
 cfg = sm.config["depth"]
 dataset, mode, seed_index = parse_model(sm.wildcards.model)
 mode_cfg = cfg["modes"][mode]

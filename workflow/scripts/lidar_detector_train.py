@@ -23,7 +23,8 @@ from redsup.lidar_detector.train import RunSpec, TrainSpec, train  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
 
 sm = snakemake  # noqa: F821
-torch.set_num_threads(sm.threads)
+from redsup.determinism import configure as deterministic_torch  # noqa: E402
+deterministic_torch(sm.threads)  # the rule's threads and deterministic kernels: same seed -> same bits
 cfg = sm.config["lidar_detector"]
 conf, seed_index = sm.wildcards.conf, int(sm.wildcards.seed)
 name = plan.run_id(conf, seed_index)

@@ -14,7 +14,8 @@ from redsup.lifting.pipeline import run_configuration, save_model, scene_inputs 
 from redsup.runlog import child_run  # noqa: E402
 
 sm = snakemake  # noqa: F821
-torch.set_num_threads(sm.threads)
+from redsup.determinism import configure as deterministic_torch  # noqa: E402
+deterministic_torch(sm.threads)  # the rule's threads and deterministic kernels: same seed -> same bits
 cfg = sm.config["lifting"]
 conf, seed_index = sm.wildcards.conf, int(sm.wildcards.seed)
 run_name = plan.run_id(conf, seed_index)

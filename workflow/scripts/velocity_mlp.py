@@ -18,7 +18,8 @@ from redsup.velocity.mlp import resolve_device, save_model  # noqa: E402
 from redsup.velocity.report import write_configuration_outputs  # noqa: E402
 
 sm = snakemake  # noqa: F821
-torch.set_num_threads(sm.threads)
+from redsup.determinism import configure as deterministic_torch  # noqa: E402
+deterministic_torch(sm.threads)  # the rule's threads and deterministic kernels: same seed -> same bits
 vcfg = sm.config["velocity"]
 spec = sm.params.run
 configuration = plan.configurations(sm.config)[spec["configuration"]]
