@@ -1,0 +1,116 @@
+"""In-box / in-mask LiDAR outlier fraction by distance, real KITTI object sample vs the embedded world
+(issue 11 §4; run by hand, not a test).
+
+    python benchmarks/bench_inmask_outliers.py                         # tiny-size world, 6 train scenes
+    python benchmarks/bench_inmask_outliers.py --scenes 12 --frames 4 --profile default --json out.json
+
+For every ground-truth car: the LiDAR points projecting into its 2D box (and into its instance mask where the
+scene has one: the world's render; the KITTI sample has label boxes only) that lie outside its 3D box grown by
+`--margin` (redsup.prep.outliers). Reported per distance bin: cars, points, the pooled fraction, the per-car
+median and 10-90 % range, points per car; for the world also the stand-in detector's masks (both levels),
+all cars and unoccluded cars only (the real sample's three cars are unoccluded). World scenes are rendered
+from the *train* split (never the test split), seed `--seed`.
+"""
+from __future__ import annotations
+
+import argparse
+import copy
+import json
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "workflow"))
+
+from redsup import config  # noqa: E402
+from redsup.adapters import adapt_scene, scene_ids  # noqa: E402
+from redsup.prep.detections import detect_scene  # noqa: E402
+from redsup.prep.outliers import by_distance, detection_records, scene_records  # noqa: E402
+from redsup.world.generate import write_scene  # noqa: E402
+
+EDGES = (0.0, 20.0, 40.0, 80.0)
+ALL = (0.0, 80.0)
+
+
+def real_records(realdata: Path, work: Path, margin: float) -> list[dict]:
+    spec = {"kind": "kitti_object", "path": str(realdata / "kitti_object"),
+            "crop": {"top": 0, "bottom": 0, "left": 0, "right": 0}, "resize": {"width": 320, "height": 96},
+            "instances": {"source": "label_boxes"}}
+    out = []
+    for scene in scene_ids("kitti_object", spec):
+        adapt_scene("kitti_object", spec, scene, work / scene)
+        out += scene_records(work / scene, "cam_front", margin=margin)
+    return out
+
+
+def world_records(cfg: dict, work: Path, n_scenes: int, frames: int, seed: int, margin: float):
+    world = copy.deepcopy(cfg["world"])
+    world["frames"] = {**world["frames"], "train": frames}
+    gt, det = [], {level: [] for level in cfg["detection"]["levels"]}
+    for i in range(n_scenes):
+        scene = work / f"train_{i:03d}"
+        write_scene(world, "world_kitti", "kitti_like", "train", i, seed, scene)
+        gt += scene_records(scene, "cam_front", margin=margin)
+        for level in det:
+            arrays, _ = detect_scene(scene, cfg["detection"], level, seed=seed + i)
+            det[level] += detection_records(arrays, scene, "cam_front")
+    return gt, det
+
+
+def fmt(v, digits=3):
+    return "—" if v is None else f"{v:.{digits}f}"
+
+
+def table(title: str, rows: list[dict]) -> str:
+    lines = [f"### {title}", "", "| distance | cars | points/car | box: pooled | median [10-90 %] | upper / lower "
+             "45 % | mask: cars | pooled | median |", "|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        lines.append(f"| {r['bin']} | {r['box_cars']} | {fmt(r['box_points_per_car'], 0)} | {fmt(r['box_fraction'])} "
+                     f"| {fmt(r['box_median'])} [{fmt(r['box_q10'], 2)}, {fmt(r['box_q90'], 2)}] "
+                     f"| {fmt(r.get('box_top_fraction'), 2)} / {fmt(r.get('box_bottom_fraction'), 2)} | {r['mask_cars']} "
+                     f"| {fmt(r['mask_fraction'])} | {fmt(r['mask_median'])} |")
+    return "\n".join(lines) + "\n"
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--profile", default="tiny")
+    ap.add_argument("--scenes", type=int, default=6)
+    ap.add_argument("--frames", type=int, default=4)
+    ap.add_argument("--seed", type=int, default=5)
+    ap.add_argument("--margin", type=float, default=None, help="3D box margin (default detection.points.gt_box_margin)")
+    ap.add_argument("--realdata", default=os.environ.get("REDSUP_REALDATA", str(ROOT.parent / "shared" / "realdata")))
+    ap.add_argument("--json", default=None, help="also write the numbers here")
+    args = ap.parse_args(argv)
+    cfg = config.load(ROOT / "config.yaml", {"profile": args.profile})
+    margin = cfg["detection"]["points"]["gt_box_margin"] if args.margin is None else args.margin
+    report = {"margin": margin, "edges": list(EDGES)}
+    with tempfile.TemporaryDirectory(prefix="bench_inmask_") as tmp:
+        tmp = Path(tmp)
+        realdata = Path(args.realdata)
+        if realdata.is_dir():
+            real = real_records(realdata, tmp / "real", margin)
+            report["real_kitti_object"] = by_distance(real, EDGES) + by_distance(real, ALL)
+            print(table(f"KITTI object sample ({len(real)} cars, 2D label boxes, no masks)", report["real_kitti_object"]))
+        else:
+            print(f"(no real data at {realdata}: KITTI rows skipped)\n")
+        gt, det = world_records(cfg, tmp / "world", args.scenes, args.frames, args.seed, margin)
+    report["world_gt"] = {"all": by_distance(gt, EDGES) + by_distance(gt, ALL),
+                          "unoccluded": by_distance(gt, EDGES, max_occlusion=0) + by_distance(gt, ALL, max_occlusion=0)}
+    print(table(f"World, ground-truth 2D box / rendered instance mask, all cars ({args.scenes} scenes x "
+                f"{args.frames} frames, {args.profile})", report["world_gt"]["all"]))
+    print(table("World, ground-truth box / mask, unoccluded cars", report["world_gt"]["unoccluded"]))
+    for level, recs in det.items():
+        report[f"world_detector_{level}"] = {"all": by_distance(recs, EDGES),
+                                             "unoccluded": by_distance(recs, EDGES, max_occlusion=0)}
+        print(table(f"World, stand-in detector ({level}) masks and their pixel boxes, all matched cars",
+                    report[f"world_detector_{level}"]["all"]))
+    if args.json:
+        Path(args.json).write_text(json.dumps(report, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
