@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 PROFILE ?= default
 
-.PHONY: venv reproduce test lint dry-run mlflow clean
+.PHONY: venv reproduce test lint dry-run mlflow mlflow-sync report rulegraph run-time clean
 
 $(BIN)/snakemake: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -31,6 +31,22 @@ dry-run: venv
 ## Browse every run: http://127.0.0.1:5000
 mlflow: venv
 	$(BIN)/mlflow server --backend-store-uri sqlite:///results/mlflow.db --host 127.0.0.1 --port 5000
+
+## Import every run record (results/runs/) into the MLflow store now, e.g. from a second shell mid-run
+mlflow-sync: venv
+	$(BIN)/python -m redsup.tracking
+
+## Every table and figure with the thesis' caption and our verdict, in one HTML file (after `make reproduce`)
+report: venv
+	$(BIN)/snakemake --config profile=$(PROFILE) --report results/report.html
+
+## The rules and how they depend on each other (needs Graphviz `dot`)
+rulegraph: venv
+	$(BIN)/snakemake --rulegraph --config profile=$(PROFILE) | dot -Tpng > docs/rulegraph.png
+
+## Wall time and peak memory per rule and stage of the last run: results/tables/run_time.md
+run-time: venv
+	$(BIN)/snakemake run_time --config profile=$(PROFILE)
 
 clean:
 	rm -rf results/* .snakemake

@@ -2,6 +2,7 @@
 # Thin on purpose: configuration, stage includes, and the named targets users rely on.
 import os
 
+import redsup.jobenv
 from snakemake.utils import min_version
 
 min_version("9.0")
@@ -9,8 +10,14 @@ min_version("9.0")
 
 configfile: os.path.join(workflow.basedir, "config.yaml")
 
+# Every job's script imports redsup from this checkout, whatever interpreter runs it (a conda env from envs/ installs
+# no project, so it has no path that breaks in Snakemake's copy .snakemake/conda/<hash>.yaml).
+redsup.jobenv.put_on_pythonpath(os.path.join(workflow.basedir, "workflow"))
+
 
 include: "workflow/rules/common.smk"
+include: "workflow/rules/report.smk"  # report() helpers for the table and figure outputs
+include: "workflow/rules/tracking.smk"  # live MLflow sync while the jobs run
 include: "workflow/rules/world.smk"
 include: "workflow/rules/prepare.smk"
 include: "workflow/rules/detection.smk"
@@ -20,7 +27,8 @@ include: "workflow/rules/calibration.smk"
 include: "workflow/rules/lifting.smk"
 include: "workflow/rules/lidar_detector.smk"
 include: "workflow/rules/adapters.smk"  # real datasets into the canonical format (README.md, "Running on the real datasets")
-include: "workflow/rules/tables.smk"  # last: it collects every stage's table and figure ids
+include: "workflow/rules/tables.smk"  # after the stages: it collects every stage's table and figure ids
+include: "workflow/rules/benchmarks.smk"  # last: run time per rule of every rule above
 
 
 localrules:
@@ -28,6 +36,7 @@ localrules:
     world,
     prepare,
     tables,
+    run_time,
 
 
 rule all:
@@ -36,6 +45,7 @@ rule all:
         TABLE_TARGETS,
         FIGURE_TARGETS,
         "results/tables/scorecard.md",
+        RUN_TIME_TARGETS,
 
 
 rule world:
@@ -55,10 +65,22 @@ rule tables:
         "results/tables/scorecard.md",
 
 
-# MLflow is the browsing layer: jobs write run records (results/runs/), imported here in one process.
+rule run_time:
+    input:
+        RUN_TIME_TARGETS,
+
+
+# MLflow is the browsing layer: jobs write run records (results/runs/), synced into the store by one writer,
+# live while the jobs run (workflow/rules/tracking.smk) and once more at the end of every invocation.
+onstart:
+    start_live_tracking()
+
+
 onsuccess:
+    stop_live_tracking()
     sync_mlflow()
 
 
 onerror:
+    stop_live_tracking()
     sync_mlflow()

@@ -7,10 +7,11 @@ process. This keeps the jobs cheap (no 2-3 s MLflow import and store connection 
 number of jobs run in parallel without sqlite lock races, and makes the files the source of truth:
 deleting `results/mlflow.db` and syncing again rebuilds the store.
 
-Status: FINISHED when the body completes, FAILED when it raises (the exception propagates), KILLED on
-SIGTERM / SIGINT (the process then exits with 128 + signal). A record is never left "RUNNING": a job
-that dies without Python noticing (SIGKILL) leaves the provisional record, which the sync imports as
-KILLED.
+Status: RUNNING in the provisional record written when the job starts (with the job's uid, pid and host, so
+a sync while the job runs shows it RUNNING), then FINISHED when the body completes, FAILED when it raises (the
+exception propagates), KILLED on SIGTERM / SIGINT (the process then exits with 128 + signal). A job that dies
+without Python noticing (SIGKILL) leaves the provisional record: the sync imports it as KILLED once its
+process is gone (or at the end of the Snakemake invocation), never as RUNNING.
 """
 from __future__ import annotations
 
@@ -19,9 +20,11 @@ import json
 import os
 import shutil
 import signal
+import socket
 import subprocess
 import threading
 import time
+import uuid
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
@@ -179,8 +182,8 @@ def child_run(record_path: str | Path, parent: str, run_name: str, *, rule: str,
     """Collect one child run of parent `parent` (a table id, "data_preparation", "world", ...).
 
     Tags: rule, wildcards, config hash, git commit, profile. The resolved config is kept as the
-    artifact `config.yaml`. The record is written provisionally at the start (status KILLED, in case the
-    process dies without a trace) and finally with its real status.
+    artifact `config.yaml`. The record is written provisionally at the start (status RUNNING, with
+    ``job`` = {uid, pid, host} that identifies this attempt of the job) and finally with its real status.
     """
     import yaml
 
@@ -188,7 +191,8 @@ def child_run(record_path: str | Path, parent: str, run_name: str, *, rule: str,
     path.parent.mkdir(parents=True, exist_ok=True)
     wildcards = {str(k): str(v) for k, v in dict(wildcards or {}).items()}
     data = {
-        "parent": parent, "run_name": run_name, "status": "KILLED", "start_time": _now_ms(),
+        "parent": parent, "run_name": run_name, "status": "RUNNING", "start_time": _now_ms(),
+        "job": {"uid": uuid.uuid4().hex, "pid": os.getpid(), "host": socket.gethostname()},
         "end_time": None, "params": {}, "metrics": [], "artifacts": [], "parent_artifacts": [],
         "tags": {"redsup.rule": rule, "redsup.wildcards": json.dumps(wildcards, sort_keys=True),
                  "redsup.config_hash": config_hash(plain(config)), "redsup.git_commit": git_commit(),

@@ -2,25 +2,33 @@
 preparation step, one child run per Snakemake job, imported from the jobs' run records.
 
 * Jobs never talk to MLflow: each writes a run record (`redsup.runlog.child_run`, the job's second
-  `log:` file). `sync_records` imports every record under `results/runs/` in one process, after every
-  Snakemake invocation (the Snakefile's `onsuccess` / `onerror` hooks) or by hand with
-  `python -m redsup.tracking` (`make mlflow-sync`). A single writer means no sqlite races, and the
-  store can be rebuilt from the records at any time.
+  `log:` file), provisionally (RUNNING) when it starts and finally when it ends. `sync_records` brings the
+  store up to every record under `results/runs/` in one process: live while Snakemake runs (`LiveSync`,
+  a thread of the Snakemake process started in `onstart`), at the end of every invocation (`onsuccess` /
+  `onerror`, a final sync: no job runs any more) and by hand with `python -m redsup.tracking`
+  (`make mlflow-sync`). One writer at a time (a file lock) means no sqlite races and no double imports, and
+  the store can be rebuilt from the records at any time.
 * Tracking URI: `$MLFLOW_TRACKING_URI` if set, else `mlflow.tracking_uri` from the config, else
   `sqlite:///results/mlflow.db` (relative to the working directory). For a local store every experiment
   gets the artifact location `<mlflow.artifact_root>/<stage>` (default `results/mlartifacts/<stage>`).
 * Parent runs are created FINISHED; they group their children through the `mlflow.parentRunId` tag.
-  Experiments are found by name, parents by their `redsup.parent` tag, children by `redsup.record_id`
-  (a hash of the record), so syncing twice imports nothing twice; a re-run job (new record) becomes a
-  new child run, told apart by its tags (`redsup.config_hash`, `redsup.git_commit`, `redsup.profile`).
+  Experiments are found by name, parents by their `redsup.parent` tag, children by `redsup.job_uid` (one
+  attempt of one job) and updated in place as their record changes (`redsup.record_id`: the hash last
+  imported), so syncing at any moment, any number of times, imports nothing twice. A re-run job (new
+  attempt) becomes a new child run, told apart by its tags (`redsup.config_hash`, `redsup.git_commit`,
+  `redsup.profile`); an interrupted attempt it replaces is deleted.
+* Each child carries `redsup.table.<id>` = "1" for every table whose rows read it (`table_filter`), and its
+  job's time and memory from the Snakemake benchmark file; table parents hold the table and figure files.
 
 `import mlflow` takes about 1.5 s, so it happens lazily inside the functions that need it.
 """
 from __future__ import annotations
 
+import contextlib
 import hashlib
 import json
 import os
+import socket
 import sys
 import time
 from collections.abc import Mapping
@@ -130,21 +138,24 @@ def init_store(tracking_uri: str, plan: Mapping[str, Any], out_json: str | Path,
         experiment_names[stage] = name
 
     # existing parents, found by tag (idempotent re-runs)
-    existing: dict[str, str] = {}
+    existing: dict[str, Any] = {}
     if experiments:
         runs = _retry(client.search_runs, list(experiments.values()),
                       filter_string=f"tags.`{TAG_ROLE}` = 'parent'", max_results=5000,
                       order_by=["attributes.start_time ASC"])
         for run in runs:
-            existing[run.data.tags.get(TAG_PARENT, "")] = run.info.run_id  # newest wins
+            existing[run.data.tags.get(TAG_PARENT, "")] = run  # newest wins
 
     parent_ids: dict[str, str] = {}
     parent_stages: dict[str, str] = {}
     for p in parents:
         name, stage = p["name"], p["stage"]
-        run_id = existing.get(name)
-        if run_id is not None and _retry(client.get_run, run_id).info.experiment_id != experiments[stage]:
-            run_id = None  # the parent moved to another stage: make a new one there
+        found = existing.get(name)
+        run_id = None
+        if found is not None and found.info.experiment_id == experiments[stage]:
+            run_id = found.info.run_id  # else the parent moved to another stage: make a new one there
+            if found.data.tags.get(RUN_NOTE, "") != (p.get("description") or ""):
+                _retry(client.set_tag, run_id, RUN_NOTE, p.get("description") or "")
         if run_id is None:
             tags = {TAG_ROLE: "parent", TAG_PARENT: name, TAG_STAGE: stage,
                     RUN_NOTE: p.get("description") or ""}
@@ -175,11 +186,57 @@ def record_id(path: str | Path) -> str:
     return hashlib.sha1(Path(path).read_bytes()).hexdigest()
 
 
-def _import_record(client, data: dict, rid: str, experiment_id: str, parent_id: str, stage: str) -> str:
-    from mlflow.entities import Metric, Param, RunTag
+TERMINAL = ("FINISHED", "FAILED", "KILLED")
+TAG_JOB_UID = "redsup.job_uid"          # one attempt of one job (runlog.child_run); the key of its child run
+TAG_RECORD_ID = "redsup.record_id"      # hash of the record as last imported (unchanged: nothing to do)
+TAG_METRICS_LOGGED = "redsup.metrics_logged"  # how many of the record's metric points are in the store
 
+
+def _now_ms() -> int:
+    return int(time.time() * 1000)
+
+
+def _pid_alive(pid) -> bool:
+    try:
+        os.kill(int(pid), 0)
+    except (ProcessLookupError, ValueError, TypeError):
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+def record_status(data: Mapping[str, Any], final: bool = False) -> str:
+    """The status a record's run has now. A provisional record (RUNNING) stays RUNNING while its process lives
+    (same host; another host's job is taken to run), and is KILLED once it is gone, or in a ``final`` sync
+    (the end of a Snakemake invocation, when none of its jobs runs any more). Old records without ``job``
+    were provisional as KILLED."""
+    status = data["status"]
+    if status != "RUNNING":
+        return status
+    job = data.get("job") or {}
+    if final:
+        return "KILLED"
+    if job.get("host") == socket.gethostname():
+        return "RUNNING" if _pid_alive(job.get("pid")) else "KILLED"
+    return "RUNNING"
+
+
+def _job_key(data: Mapping[str, Any], rid: str) -> str:
+    return (data.get("job") or {}).get("uid") or rid
+
+
+def _import_record(client, data: dict, rid: str, experiment_id: str, parent_id: str, stage: str,
+                   extra_tags: Mapping[str, str] | None = None, job_metrics: Mapping[str, float] | None = None,
+                   status: str | None = None) -> str:
+    """A new child run from a record; a RUNNING one gets its params, tags and metrics so far, and its artifacts
+    and end when a later sync sees the record finished (`_update_record`)."""
+    from mlflow.entities import Metric, Param
+
+    status = status or data["status"]
     tags = {**data["tags"], PARENT_RUN_ID: parent_id, TAG_ROLE: "child", TAG_PARENT: data["parent"],
-            TAG_STAGE: stage, "redsup.record_id": rid}
+            TAG_STAGE: stage, TAG_RECORD_ID: rid, TAG_JOB_UID: _job_key(data, rid),
+            TAG_METRICS_LOGGED: str(len(data["metrics"])), **(extra_tags or {})}
     commit = tags.get("redsup.git_commit", "unknown")
     if commit != "unknown":
         tags[GIT_COMMIT] = commit.removesuffix("-dirty")
@@ -190,15 +247,52 @@ def _import_record(client, data: dict, rid: str, experiment_id: str, parent_id: 
     for i in range(0, len(params), 100):
         _retry(client.log_batch, run_id, params=params[i:i + 100])
     metrics = [Metric(key=k, value=v, timestamp=t, step=s) for k, v, s, t in data["metrics"]]
+    end = data.get("end_time") or _now_ms()
+    if status != "RUNNING":
+        metrics += [Metric(key=k, value=v, timestamp=end, step=0) for k, v in (job_metrics or {}).items()]
     for i in range(0, len(metrics), 1000):
         _retry(client.log_batch, run_id, metrics=metrics[i:i + 1000])
+    if status != "RUNNING":
+        _finish(client, run_id, parent_id, data, status)
+    return run_id
+
+
+def _finish(client, run_id: str, parent_id: str, data: Mapping[str, Any], status: str) -> None:
     for path, artifact_path in data["artifacts"]:
         _log_path(client, run_id, path, artifact_path)
     for path, artifact_path in data.get("parent_artifacts", []):
         _log_path(client, parent_id, path, artifact_path)
-    end = data.get("end_time") or data["start_time"]
-    _retry(client.set_terminated, run_id, data["status"], end_time=end)
-    return run_id
+    _retry(client.set_terminated, run_id, status, end_time=data.get("end_time") or _now_ms())
+
+
+def _update_record(client, run, data: dict, rid: str, parent_id: str, status: str) -> None:
+    """Bring the child run of one job attempt up to its record: new tags, params and metric points, then (once
+    the record is final) artifacts and status. MLflow keeps a param's first value; a changed one is reported."""
+    from mlflow.entities import Metric, Param
+
+    run_id = run.info.run_id
+    tags = run.data.tags
+    new_tags = {k: v for k, v in data["tags"].items() if tags.get(k) != v}
+    params = [Param(k, v) for k, v in data["params"].items() if k not in run.data.params]
+    changed = sorted(k for k, v in data["params"].items() if k in run.data.params and run.data.params[k] != v)
+    if changed:
+        print(f"mlflow sync: {data['run_name']}: params {changed} changed while the job ran; kept the first",
+              file=sys.stderr)
+    logged = int(tags.get(TAG_METRICS_LOGGED, "0") or 0)
+    metrics = [Metric(key=k, value=v, timestamp=t, step=s) for k, v, s, t in data["metrics"][logged:]]
+    for i in range(0, max(len(params), 1), 100):
+        if params[i:i + 100]:
+            _retry(client.log_batch, run_id, params=params[i:i + 100])
+    for i in range(0, len(metrics), 1000):
+        _retry(client.log_batch, run_id, metrics=metrics[i:i + 1000])
+    new_tags.update({TAG_RECORD_ID: rid, TAG_METRICS_LOGGED: str(len(data["metrics"]))})
+    for key, value in new_tags.items():
+        _retry(client.set_tag, run_id, key, value)
+    if status != "RUNNING":
+        if run.info.status == "RUNNING" or tags.get(TAG_RECORD_ID) != rid:
+            _finish(client, run_id, parent_id, data, status)
+        elif run.info.status != status:
+            _retry(client.set_terminated, run_id, status, end_time=data.get("end_time") or _now_ms())
 
 
 def _log_path(client, run_id: str, path: str, artifact_path: str | None) -> None:
@@ -211,20 +305,146 @@ def _log_path(client, run_id: str, path: str, artifact_path: str | None) -> None
         print(f"mlflow sync: artifact {p} no longer exists, skipped", file=sys.stderr)
 
 
+@contextlib.contextmanager
+def _sync_lock(folder: Path):
+    """One sync at a time per store registry (the live thread, `make mlflow-sync`, the end-of-run sync)."""
+    import fcntl
+
+    folder.mkdir(parents=True, exist_ok=True)
+    with open(folder / ".sync.lock", "w") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
+TAG_TABLE_PREFIX = "redsup.table."   # + table id = "1" on every child run whose result a row of the table reads
+TAG_TABLES = "redsup.tables"         # the same ids, comma-separated (a readable column in the UI)
+TAG_RECORD_PATH = "redsup.record_path"
+TAG_ARTIFACTS_SHA1 = "redsup.artifacts_sha1"
+
+
+def table_filter(table_id: str) -> str:
+    """The MLflow search filter that lists every configuration (child run) of one table."""
+    return f"tags.`{TAG_TABLE_PREFIX}{table_id}` = '1'"
+
+
+def table_memberships(records: list[tuple[Path, dict]], runs_root: str | Path) -> dict[Path, set[str]]:
+    """record path -> ids of the tables whose rows read its run's result.
+
+    From each table job's own record (rule ``table``; its ``rows`` param: {label: [run or run@step]}): every
+    run's result file (``plan.result_path``, ``results/<x>.json``) is written by the job whose run record is
+    ``<runs_root>/<x>.json`` (the rules name both after the output). A run shared by several tables gets all.
+    """
+    from redsup.tables.contract import plan_of
+
+    out: dict[Path, set[str]] = {}
+    for path, data in records:
+        if data.get("tags", {}).get("redsup.rule") != "table":
+            continue
+        table = data["parent"]
+        try:
+            rows = json.loads(data["params"].get("rows", "{}"))
+            plan = plan_of(table)
+        except (KeyError, ValueError) as exc:
+            print(f"mlflow sync: {path}: table rows not readable ({exc}); its runs get no table tag", file=sys.stderr)
+            continue
+        for runs in rows.values():
+            for run in runs:
+                result = Path(plan.result_path(run.rsplit("@", 1)[0] if "@" in run else run))
+                try:
+                    record = Path(runs_root) / result.relative_to("results")
+                except ValueError:
+                    continue
+                out.setdefault(record, set()).add(table)
+    return out
+
+
+def _table_tags(tables: set[str]) -> dict[str, str]:
+    tags = {f"{TAG_TABLE_PREFIX}{t}": "1" for t in sorted(tables)}
+    if tables:
+        tags[TAG_TABLES] = ",".join(sorted(tables))
+    return tags
+
+
+def _reconcile(client, run, want_tags: Mapping[str, str], job_metrics: Mapping[str, float], end_ms: int) -> int:
+    """Bring an imported child up to date: table tags (added / removed) and the job's benchmark metrics
+    (which Snakemake writes after the job's record). Returns the number of changes."""
+    from mlflow.entities import Metric
+
+    tags = run.data.tags
+    changes = 0
+    for key in [k for k in tags if (k.startswith(TAG_TABLE_PREFIX) or k == TAG_TABLES) and k not in want_tags]:
+        _retry(client.delete_tag, run.info.run_id, key)
+        changes += 1
+    for key, value in want_tags.items():
+        if tags.get(key) != value:
+            _retry(client.set_tag, run.info.run_id, key, value)
+            changes += 1
+    missing = [Metric(key=k, value=v, timestamp=end_ms, step=0) for k, v in job_metrics.items()
+               if k not in run.data.metrics]
+    if missing:
+        _retry(client.log_batch, run.info.run_id, metrics=missing)
+        changes += 1
+    return changes
+
+
+def _sync_parent_artifacts(client, registry: Mapping[str, Any], table_ids: list[str], results_root: Path) -> int:
+    """Each table's parent holds the table (md, csv) and its figure (png), re-logged when their bytes change."""
+    logged = 0
+    for table in table_ids:
+        parent = registry["parents"].get(table)
+        files = [(results_root / "tables" / f"{table}.{ext}", "table") for ext in ("md", "csv")]
+        files.append((results_root / "figures" / f"{table}.png", "figure"))
+        files = [(p, a) for p, a in files if p.is_file()]
+        if parent is None or not files:
+            continue
+        digest = hashlib.sha1()
+        for p, a in files:
+            digest.update(f"{a}/{p.name}\0".encode())
+            digest.update(p.read_bytes())
+        if _retry(client.get_run, parent).data.tags.get(TAG_ARTIFACTS_SHA1) == digest.hexdigest():
+            continue
+        for p, a in files:
+            _retry(client.log_artifact, parent, str(p), a)
+        _retry(client.set_tag, parent, TAG_ARTIFACTS_SHA1, digest.hexdigest())
+        logged += 1
+    return logged
+
+
 def sync_records(tracking_uri: str, plan: Mapping[str, Any], runs_root: str | Path, out_json: str | Path, *,
                  artifact_root: str | Path = DEFAULT_ARTIFACT_ROOT,
-                 experiment_prefix: str = DEFAULT_EXPERIMENT_PREFIX) -> dict:
-    """Create experiments and parents (`init_store`) and import every record not imported yet.
+                 experiment_prefix: str = DEFAULT_EXPERIMENT_PREFIX, table_ids: list[str] | None = None,
+                 final: bool = False) -> dict:
+    """Create experiments and parents (`init_store`) and bring the store up to the run records.
 
-    Returns (and writes to `out_json`) the registry plus counts: imported, already present, unreadable.
+    One child run per job attempt (``job.uid`` of the record; older records: the record's hash): created when
+    first seen (RUNNING while the job runs, `record_status`), updated in place as the record changes, never
+    twice. A later attempt of the same job (same record path) replaces an interrupted one (RUNNING / KILLED in
+    the store), which is deleted (MLflow's soft delete); a finished one is kept as history. Every child is
+    tagged with the tables it serves (`table_memberships`; tags of superseded runs are removed) and carries
+    its job's wall time, CPU time and peak RSS from the job's benchmark file
+    (`<runs_root>/../benchmarks/<rule>/...`, `redsup.benchmarks`). The parents of `table_ids` get the table
+    and figure files as artifacts (`results_root` = the folder above `runs_root`). One sync at a time
+    (a file lock beside `out_json`). Returns (and writes to `out_json`) the registry plus counts.
     A record whose parent is not in the plan is imported under a parent created for it in stage `data`.
     """
+    with _sync_lock(Path(out_json).parent):
+        return _sync_records(tracking_uri, plan, Path(runs_root), out_json, artifact_root=artifact_root,
+                             experiment_prefix=experiment_prefix, table_ids=table_ids, final=final)
+
+
+def _sync_records(tracking_uri, plan, runs_root: Path, out_json, *, artifact_root, experiment_prefix, table_ids,
+                  final) -> dict:
+    from redsup.benchmarks import benchmark_path, job_metrics
+
     records = []
     unreadable = []
     for path in find_records(runs_root):
         try:
             records.append((path, json.loads(path.read_text())))
-        except (json.JSONDecodeError, OSError) as exc:
+        except (json.JSONDecodeError, OSError) as exc:  # a record being replaced is never half-written (.part)
             unreadable.append(f"{path}: {exc}")
     plan = {"stages": dict(plan.get("stages") or {}), "parents": list(plan.get("parents") or [])}
     known = {p["name"] for p in plan["parents"]}
@@ -234,34 +454,127 @@ def sync_records(tracking_uri: str, plan: Mapping[str, Any], runs_root: str | Pa
     registry = init_store(tracking_uri, plan, out_json, artifact_root=artifact_root,
                           experiment_prefix=experiment_prefix)
     client = _client(tracking_uri)
-    existing = set()
+    existing: dict[str, Any] = {}
     if registry["experiments"]:
         runs = _retry(client.search_runs, list(registry["experiments"].values()),
                       filter_string=f"tags.`{TAG_ROLE}` = 'child'", max_results=50000)
-        existing = {r.data.tags.get("redsup.record_id") for r in runs}
-    imported = 0
+        existing = {r.data.tags.get(TAG_JOB_UID) or r.data.tags.get(TAG_RECORD_ID): r for r in runs}
+    results_root = runs_root.parent
+    memberships = table_memberships(records, runs_root)
+    imported = updated = deleted = 0
+    current: dict[str, str] = {}   # job key -> record path
     for path, data in records:
         rid = record_id(path)
-        if rid in existing:
-            continue
+        key = _job_key(data, rid)
+        try:
+            rel = str(path.relative_to(results_root.parent)) if path.is_absolute() else str(path)
+        except ValueError:
+            rel = str(path)
+        current[key] = rel
+        status = record_status(data, final)
+        want = _table_tags(memberships.get(path, set()))
+        bench = benchmark_path(path, data["tags"].get("redsup.rule", ""), runs_root=runs_root,
+                               benchmark_root=results_root / "benchmarks")
+        metrics = job_metrics(bench) if status != "RUNNING" and bench.is_file() else {}
+        end = data.get("end_time") or data["start_time"]
         stage = registry["parent_stages"][data["parent"]]
-        _import_record(client, data, rid, registry["experiments"][stage], registry["parents"][data["parent"]],
-                       stage)
+        parent_id = registry["parents"][data["parent"]]
+        run = existing.get(key)
+        if run is not None:
+            if run.data.tags.get(TAG_RECORD_ID) != rid or run.info.status != status:
+                _update_record(client, run, data, rid, parent_id, status)
+                run = _retry(client.get_run, run.info.run_id)
+                updated += 1
+            updated += bool(_reconcile(client, run, want, metrics, end))
+            continue
+        _import_record(client, data, rid, registry["experiments"][stage], parent_id, stage,
+                       extra_tags={**want, TAG_RECORD_PATH: rel}, job_metrics=metrics, status=status)
         imported += 1
-    registry.update({"imported": imported, "records": len(records), "unreadable": unreadable})
+    latest = {rel: key for key, rel in current.items()}
+    for key, run in existing.items():
+        if key in current:
+            continue
+        # superseded: a later attempt rewrote the record (or the record is gone); it serves no table now
+        replaced = run.data.tags.get(TAG_RECORD_PATH) in latest
+        if replaced and run.info.status in ("RUNNING", "KILLED"):
+            _retry(client.delete_run, run.info.run_id)  # an interrupted attempt, redone: not a second copy
+            deleted += 1
+            continue
+        if run.info.status == "RUNNING":  # its record vanished while it ran
+            _retry(client.set_terminated, run.info.run_id, "KILLED")
+        updated += bool(_reconcile(client, run, {}, {}, 0))
+    parents_logged = _sync_parent_artifacts(client, registry, list(table_ids or []), results_root)
+    registry.update({"imported": imported, "updated": updated, "deleted": deleted, "records": len(records),
+                     "unreadable": unreadable, "parents_with_new_artifacts": parents_logged})
     Path(out_json).write_text(json.dumps(registry, indent=2, sort_keys=True) + "\n")
     return registry
 
 
 def sync_from_config(config: Mapping[str, Any], runs_root: str | Path = "results/runs",
-                     out_json: str | Path = "results/mlflow/registry.json") -> dict:
-    """`sync_records` with the tracking settings of a resolved config and the plan of every table."""
-    from redsup.tables import mlflow_plan
+                     out_json: str | Path = "results/mlflow/registry.json", final: bool = False) -> dict:
+    """`sync_records` with the tracking settings of a resolved config and the plan of every table; each
+    table's parent says in its description how to list all its configurations."""
+    from redsup.tables import load_registry, mlflow_plan
 
     settings = config.get("mlflow", {})
-    return sync_records(resolve_tracking_uri(settings.get("tracking_uri")), mlflow_plan(), runs_root, out_json,
+    tables = list(load_registry()["tables"])
+    plan = mlflow_plan()
+    for parent in plan["parents"]:
+        if parent["name"] in tables:
+            parent["description"] = (f"{parent.get('description') or ''}\n\nEvery configuration of this table "
+                                     f"(search the runs of all experiments): `{table_filter(parent['name'])}`. "
+                                     "The table and its figure are this run's artifacts.")
+    return sync_records(resolve_tracking_uri(settings.get("tracking_uri")), plan, runs_root, out_json,
                         artifact_root=settings.get("artifact_root", DEFAULT_ARTIFACT_ROOT),
-                        experiment_prefix=settings.get("experiment_prefix", DEFAULT_EXPERIMENT_PREFIX))
+                        experiment_prefix=settings.get("experiment_prefix", DEFAULT_EXPERIMENT_PREFIX),
+                        table_ids=tables, final=final)
+
+
+class LiveSync:
+    """Syncs the store from a background thread while Snakemake runs (the Snakefile's ``onstart``), whenever
+    a run record or benchmark file changed, at most every ``interval_s`` seconds; ``stop`` ends it before the
+    final sync. Errors are printed, never raised: tracking must not cost a run its results."""
+
+    def __init__(self, sync, watch: list[str | Path], interval_s: float = 10.0):
+        import threading
+
+        self._sync, self._watch, self.interval_s = sync, [Path(w) for w in watch], float(interval_s)
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._loop, name="redsup-mlflow-live", daemon=True)
+        self._seen: tuple = ()
+        self.syncs = 0
+
+    def _state(self) -> tuple:
+        files = [p for w in self._watch if w.exists() for p in w.rglob("*") if p.suffix in (".json", ".tsv")]
+        stats = []
+        for p in files:
+            try:
+                stats.append(p.stat().st_mtime_ns)
+            except OSError:
+                continue
+        return (len(stats), max(stats, default=0))
+
+    def _loop(self) -> None:
+        while not self._stop.wait(self.interval_s):
+            state = self._state()
+            if state == self._seen:
+                continue
+            try:
+                self._sync()
+                self._seen = state
+                self.syncs += 1
+            except Exception as exc:  # noqa: BLE001
+                print(f"MLflow live sync failed ({type(exc).__name__}: {exc}); the final sync retries",
+                      file=sys.stderr)
+
+    def start(self) -> "LiveSync":
+        self._thread.start()
+        return self
+
+    def stop(self, timeout: float = 120.0) -> None:
+        self._stop.set()
+        if self._thread.is_alive():
+            self._thread.join(timeout)
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -273,9 +586,11 @@ def main(argv: list[str] | None = None) -> None:
     parser = argparse.ArgumentParser(description=main.__doc__)
     parser.add_argument("config", nargs="?", default="config.yaml")
     parser.add_argument("--runs", default="results/runs")
+    parser.add_argument("--final", action="store_true",
+                        help="no job runs any more: provisional (RUNNING) records become KILLED runs")
     args = parser.parse_args(argv)
     start = time.perf_counter()
-    out = sync_from_config(load(args.config), args.runs)
+    out = sync_from_config(load(args.config), args.runs, final=args.final)
     print(f"mlflow sync: {out['imported']} new runs of {out['records']} records into {out['tracking_uri']} "
           f"({time.perf_counter() - start:.1f} s)")
 

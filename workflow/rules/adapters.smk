@@ -20,7 +20,7 @@ rule adapt_scene:
         mem_mb=2000,
         runtime=30,
     conda:
-        ENV
+        ENVS["data"]
     script:
         "../scripts/adapt_scene.py"
 
@@ -41,6 +41,6 @@ rule adapt_clips:
         mem_mb=1000,
         runtime=30,
     conda:
-        ENV
+        ENVS["data"]
     script:
         "../scripts/adapt_clips.py"

@@ -34,7 +34,7 @@ rule calibration_eval:
         mem_mb=2000,
         runtime=15,
     conda:
-        ENV
+        ENVS["calibration"]
     script:
         "../scripts/calibration_eval.py"
 
@@ -61,7 +61,7 @@ rule calibration_series:
         mem_mb=2000,
         runtime=10,
     conda:
-        ENV
+        ENVS["calibration"]
     script:
         "../scripts/calibration_series.py"
 
@@ -70,7 +70,7 @@ rule calibration_fig1:
     input:
         series=lambda wc: calib_plan.result_path(CALIB_FIGURES[wc.figure]),
     output:
-        png="results/figures/{figure}.png",
+        png=report_figure("results/figures/{figure}.png"),
     log:
         "results/logs/figures/{figure}.log",
         run="results/runs/figures/{figure}.json",
@@ -83,6 +83,6 @@ rule calibration_fig1:
         mem_mb=1000,
         runtime=10,
     conda:
-        ENV
+        ENVS["calibration"]
     script:
         "../scripts/calibration_fig1.py"

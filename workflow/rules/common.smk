@@ -9,7 +9,9 @@ _resolved = redsup.config.resolve(config)
 config.clear()
 config.update(_resolved)
 
-ENV = "../../envs/redsup.yaml"
+# conda env of each stage's rules (envs/<stage>.yaml, pinned; used with --sdm conda, e.g. the SLURM profile)
+ENVS = {stage: f"../../envs/{stage}.yaml" for stage in ("data", "velocity", "depth", "calibration", "lifting",
+                                                          "detector", "tables")}
 SPLITS = ("train", "test", "long")
 CLIP_SPLIT_NAMES = list(config["velocity_clips"]["splits"])
 DET_LEVELS = ("coco", "cityscapes")
@@ -105,7 +107,7 @@ def sync_mlflow():
     import redsup.tracking
 
     try:
-        out = redsup.tracking.sync_from_config(config)
+        out = redsup.tracking.sync_from_config(config, final=True)  # no job of this invocation runs any more
         print(f"MLflow: {out['imported']} new runs from {out['records']} records -> {out['tracking_uri']}")
     except Exception as exc:  # tracking must never cost the user their results
         print(f"MLflow sync failed ({type(exc).__name__}: {exc}); rerun `python -m redsup.tracking`")

@@ -33,7 +33,7 @@ rule train_depth:
         mem_mb=3000,
         runtime=60,
     conda:
-        ENV
+        ENVS["depth"]
     script:
         "../scripts/depth_train.py"
 
@@ -56,7 +56,7 @@ rule predict_depth:
         mem_mb=2000,
         runtime=20,
     conda:
-        ENV
+        ENVS["depth"]
     script:
         "../scripts/depth_predict.py"
 
@@ -80,7 +80,7 @@ rule depth_eval:
         mem_mb=3000,
         runtime=60,
     conda:
-        ENV
+        ENVS["depth"]
     script:
         "../scripts/depth_eval.py"
 
@@ -89,7 +89,7 @@ rule depth_figure:
     input:
         lambda wc: [depth_plan.result_path(run) for run in dict.fromkeys(r[1] for r in TABLE_ROWS.get(wc.figure, []))],
     output:
-        "results/figures/{figure}.png",
+        report_figure("results/figures/{figure}.png"),
     log:
         "results/logs/figures/{figure}.log",
         run="results/runs/figures/{figure}.json",
@@ -104,6 +104,6 @@ rule depth_figure:
         mem_mb=1000,
         runtime=10,
     conda:
-        ENV
+        ENVS["depth"]
     script:
         "../scripts/depth_figure.py"

@@ -17,7 +17,7 @@ rule detect_instances:
         mem_mb=2000,
         runtime=30,
     conda:
-        ENV
+        ENVS["data"]
     script:
         "../scripts/detect_instances.py"
 
@@ -37,7 +37,7 @@ rule segment_road:
         mem_mb=2000,
         runtime=30,
     conda:
-        ENV
+        ENVS["data"]
     script:
         "../scripts/segment_road.py"
 
@@ -58,7 +58,7 @@ rule tracks3d:
         mem_mb=1000,
         runtime=20,
     conda:
-        ENV
+        ENVS["data"]
     script:
         "../scripts/tracks3d.py"
 
@@ -78,6 +78,6 @@ rule medianflow:
         mem_mb=2000,
         runtime=60,
     conda:
-        ENV
+        ENVS["data"]
     script:
         "../scripts/medianflow.py"

@@ -31,7 +31,7 @@ rule lidar_detector_split:
         mem_mb=3000,
         runtime=20,
     conda:
-        ENV
+        ENVS["detector"]
     script:
         "../scripts/lidar_detector_split.py"
 
@@ -57,6 +57,6 @@ rule lidar_detector_train:
         mem_mb=4000,
         runtime=60,
     conda:
-        ENV
+        ENVS["detector"]
     script:
         "../scripts/lidar_detector_train.py"

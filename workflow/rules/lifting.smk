@@ -34,7 +34,7 @@ rule lifting_run:
         mem_mb=3000,
         runtime=60,
     conda:
-        ENV
+        ENVS["lifting"]
     script:
         "../scripts/lifting_run.py"
 
@@ -57,6 +57,6 @@ rule lifting_labels:
         mem_mb=2000,
         runtime=20,
     conda:
-        ENV
+        ENVS["lifting"]
     script:
         "../scripts/lifting_labels.py"

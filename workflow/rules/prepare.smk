@@ -16,7 +16,7 @@ rule prepare_camera:
         mem_mb=2000,
         runtime=30,
     conda:
-        ENV
+        ENVS["data"]
     script:
         "../scripts/prepare_camera.py"
 
@@ -36,6 +36,6 @@ rule lidar_depth:
         mem_mb=2000,
         runtime=30,
     conda:
-        ENV
+        ENVS["data"]
     script:
         "../scripts/lidar_depth.py"

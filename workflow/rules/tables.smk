@@ -9,8 +9,8 @@ rule table:
     input:
         get_table_inputs,
     output:
-        md="results/tables/{table}.md",
-        csv="results/tables/{table}.csv",
+        md=report_table("results/tables/{table}.md", "md"),
+        csv=report_table("results/tables/{table}.csv", "csv"),
         tex="results/tables/{table}.tex",
         score="results/tables/{table}.score.json",
     log:
@@ -27,7 +27,7 @@ rule table:
         mem_mb=1000,
         runtime=10,
     conda:
-        ENV
+        ENVS["tables"]
     script:
         "../scripts/table.py"
 
@@ -46,7 +46,7 @@ rule data_summary:
         mem_mb=2000,
         runtime=10,
     conda:
-        ENV
+        ENVS["tables"]
     script:
         "../scripts/data_summary.py"
 
@@ -56,7 +56,7 @@ rule world_frame_overview:
         scene=f"results/raw/{OVERVIEW_SCENE}",
         detections=f"results/prepared/{OVERVIEW_SCENE}/detections_cityscapes.npz",
     output:
-        "results/figures/world_frame_overview.png",
+        report_fixed("results/figures/world_frame_overview.png", OVERVIEW_CAPTION, "world_frame_overview", "png"),
     log:
         "results/logs/figures/world_frame_overview.log",
         run="results/runs/figures/world_frame_overview.json",
@@ -67,7 +67,7 @@ rule world_frame_overview:
         mem_mb=2000,
         runtime=10,
     conda:
-        ENV
+        ENVS["tables"]
     script:
         "../scripts/frame_overview.py"
 
@@ -76,7 +76,7 @@ rule scorecard:
     input:
         expand("results/tables/{table}.score.json", table=TABLE_IDS),
     output:
-        "results/tables/scorecard.md",
+        report_fixed("results/tables/scorecard.md", SCORECARD_CAPTION, "scorecard", "md"),
     log:
         "results/logs/tables/scorecard.log",
     benchmark:
@@ -86,6 +86,6 @@ rule scorecard:
         mem_mb=500,
         runtime=5,
     conda:
-        ENV
+        ENVS["tables"]
     script:
         "../scripts/scorecard.py"

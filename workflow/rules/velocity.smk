@@ -35,7 +35,7 @@ rule velocity_fit_generator:
         mem_mb=1000,
         runtime=10,
     conda:
-        ENV
+        ENVS["velocity"]
     script:
         "../scripts/velocity_fit.py"
 
@@ -63,7 +63,7 @@ rule velocity_baseline:
         mem_mb=1000,
         runtime=10,
     conda:
-        ENV
+        ENVS["velocity"]
     script:
         "../scripts/velocity_baseline.py"
 
@@ -99,7 +99,7 @@ rule velocity_mlp:
         mem_mb=2000,
         runtime=60,
     conda:
-        ENV
+        ENVS["velocity"]
     script:
         "../scripts/velocity_mlp.py"
 
@@ -119,7 +119,7 @@ rule velocity_clip_counts:
         mem_mb=1000,
         runtime=10,
     conda:
-        ENV
+        ENVS["velocity"]
     script:
         "../scripts/velocity_clip_counts.py"
 
@@ -143,7 +143,7 @@ rule velocity_figure_numbers:
         mem_mb=1000,
         runtime=10,
     conda:
-        ENV
+        ENVS["velocity"]
     script:
         "../scripts/velocity_figure_numbers.py"
 
@@ -153,7 +153,7 @@ rule velocity_figure:
         numbers="results/velocity/figures/{figure}.json",
         generator="results/velocity/generator_statistics.json",
     output:
-        "results/figures/{figure}.png",
+        report_figure("results/figures/{figure}.png"),
     log:
         "results/logs/figures/{figure}.log",
         run="results/runs/figures/{figure}.json",
@@ -166,6 +166,6 @@ rule velocity_figure:
         mem_mb=1000,
         runtime=10,
     conda:
-        ENV
+        ENVS["velocity"]
     script:
         "../scripts/velocity_figure.py"

@@ -18,7 +18,7 @@ rule world_scene:
         mem_mb=3000,
         runtime=60,
     conda:
-        ENV
+        ENVS["data"]
     script:
         "../scripts/world_scene.py"
 
@@ -39,6 +39,6 @@ rule world_clips:
         mem_mb=3000,
         runtime=60,
     conda:
-        ENV
+        ENVS["data"]
     script:
         "../scripts/world_clips.py"

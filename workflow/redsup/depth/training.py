@@ -12,6 +12,7 @@ from collections.abc import Callable, Mapping, Sequence as Seq
 import numpy as np
 import torch
 from torch import nn
+from tqdm import tqdm
 
 from redsup.depth import data, pipeline
 
@@ -54,7 +55,8 @@ def train(models: Mapping[str, nn.Module], seqs: Seq[data.Sequence], sources: Se
         m.train()
     start = time.perf_counter()
     last: dict = {}
-    for step, idx in enumerate(batches(len(samples), batch_size, steps, rng), start=1):
+    for step, idx in enumerate(tqdm(batches(len(samples), batch_size, steps, rng), total=steps, desc="train depth",
+                                    unit="step", mininterval=5), start=1):
         if step == decay_step + 1 and decay_step > 0:
             for group in optimizer.param_groups:
                 group["lr"] = lr * gamma

@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 import torch
+from tqdm import tqdm
 
 from redsup.det3d.template import Template
 from redsup.lidar_detector.augment import IDENTITY, AugmentSpec, sample_transform
@@ -124,7 +125,7 @@ def train(data: SplitData, run: RunSpec, grid: GridSpec, spec: TrainSpec, aug: A
     ema = {k: v.detach().clone() for k, v in model.named_parameters()} if spec.ema_decay > 0 else None
     batches = _batches(data.n_frames, min(spec.batch, data.n_frames), rng)
     t0 = time.perf_counter()
-    for step in range(spec.steps):
+    for step in tqdm(range(spec.steps), desc="train detector", unit="step", mininterval=5):
         idx = next(batches)
         tfs = [sample_transform(rng, aug) if spec.augment else IDENTITY for _ in idx]
         pts = [torch.from_numpy(tf.points(data.points(int(f)))).to(device) for tf, f in zip(tfs, idx)]

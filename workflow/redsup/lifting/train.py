@@ -17,6 +17,7 @@ from typing import Callable
 
 import numpy as np
 import torch
+from tqdm import tqdm
 
 from redsup.lifting.data import ObjectTable
 
@@ -80,7 +81,7 @@ def train(model: torch.nn.Module, criterion, table: ObjectTable, cfg: dict, seed
     last: dict[str, float] = {}
     step, skipped = 0, 0
     model.train()
-    for _epoch in range(int(cfg["epochs"])):
+    for _epoch in tqdm(range(int(cfg["epochs"])), desc="train lifting", unit="epoch", mininterval=5):
         for idx in table.epoch_batches(int(cfg["batch_size"]), span, rng):
             batch = table.batch(idx, span=span)
             out = model(batch.points, batch.mask, batch.context)

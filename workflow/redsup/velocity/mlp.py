@@ -17,6 +17,7 @@ from collections.abc import Callable
 import numpy as np
 import torch
 from torch import nn
+from tqdm import tqdm
 
 from redsup.velocity.geometry import Calibration
 from redsup.velocity.smoothing import gaussian_smooth
@@ -92,7 +93,7 @@ def train_mlp(features: np.ndarray, targets: np.ndarray, *, hidden: int, layers:
              for k, (a, b) in (eval_sets or {}).items() if len(a)}
     curve = []
     n = len(x)
-    for epoch in range(epochs):
+    for epoch in tqdm(range(epochs), desc="train velocity MLP", unit="epoch", mininterval=5):
         model.train()
         order = torch.randperm(n, generator=gen).to(device)
         total = 0.0

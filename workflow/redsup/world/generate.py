@@ -14,6 +14,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
+from tqdm import tqdm
 
 from ..sceneio import write_intrinsics
 from .common import SPLIT_CODES, derive_rng
@@ -107,7 +108,7 @@ def _render_frames(world, cfg, dom, cams, lidar, view, n_frames, folder: Path, r
     with open(folder / "gt" / "boxes.csv", "w", newline="") as fh:
         writer = csv.writer(fh)
         writer.writerow(COLUMNS)
-        for i in range(n_frames):
+        for i in tqdm(range(n_frames), desc=f"render {folder.name}", unit="frame", mininterval=5):
             state = frame_state(world, i, reach)
             name = f"{i:06d}"
             T_wl = state.T_world_vehicle @ lidar.T_vehicle_sensor

@@ -1,0 +1,198 @@
+"""Live tracking: runs appear RUNNING while their job runs and end FINISHED / KILLED in place; a killed attempt
+that a re-run replaces is removed; syncs at any moment (also concurrently) never import a job twice; the
+LiveSync thread follows the records. Real child processes write the records (redsup.runlog.child_run)."""
+from __future__ import annotations
+
+import json
+import multiprocessing
+import os
+import signal
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("mlflow")
+
+from redsup import runlog, tracking  # noqa: E402
+
+WORKFLOW_DIR = Path(tracking.__file__).resolve().parents[1]
+PLAN = {"stages": {"data": "data"}, "parents": [{"name": "world", "stage": "data"}]}
+
+
+@pytest.fixture()
+def work(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("MLFLOW_DISABLE_TELEMETRY", "true")
+    w = {"root": tmp_path, "runs": tmp_path / "results" / "runs", "uri": f"sqlite:///{tmp_path}/results/mlflow.db",
+         "registry": tmp_path / "results" / "mlflow" / "registry.json"}
+    w["sync"] = lambda final=False: tracking.sync_records(w["uri"], PLAN, w["runs"], w["registry"], final=final,
+                                                          artifact_root=tmp_path / "results" / "mlartifacts")
+    return w
+
+
+def _job(work, name: str, gate: Path, steps: int = 3) -> subprocess.Popen:
+    """A job in its own process: logs `steps` metric points, then waits until `gate` exists, then finishes."""
+    script = textwrap.dedent(f"""
+        import time
+        from pathlib import Path
+        from redsup import runlog
+        with runlog.child_run({str(work['runs'] / f'{name}.json')!r}, "world", {name!r}, rule="world_scene",
+                              wildcards={{"scene": {name!r}}}, config={{"profile": "tiny"}}) as run:
+            Path({str(work['root'] / f'{name}.started')!r}).write_text("x")
+            while not Path({str(gate)!r}).exists():
+                time.sleep(0.05)
+            for i in range({steps}):
+                run.log_metric("loss", 1.0 / (i + 1), step=i)
+            run.log_text("done", "out.txt")
+    """)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(WORKFLOW_DIR), os.environ.get("PYTHONPATH", "")])}
+    proc = subprocess.Popen([sys.executable, "-c", script], cwd=work["root"], env=env)
+    deadline = time.monotonic() + 60
+    while not (work["root"] / f"{name}.started").exists():
+        assert proc.poll() is None and time.monotonic() < deadline, "job did not start"
+        time.sleep(0.05)
+    return proc
+
+
+def _runs(work, name=None, deleted=False):
+    from mlflow.entities import ViewType
+    from mlflow.tracking import MlflowClient
+
+    client = MlflowClient(work["uri"])
+    reg = json.loads(work["registry"].read_text())
+    flt = "tags.`redsup.role` = 'child'" + (f" and attributes.run_name = '{name}'" if name else "")
+    return client.search_runs(list(reg["experiments"].values()), flt,
+                              run_view_type=ViewType.ALL if deleted else ViewType.ACTIVE_ONLY)
+
+
+def test_running_then_finished_in_place(work):
+    gate = work["root"] / "go"
+    proc = _job(work, "a", gate)
+    try:
+        first = work["sync"]()
+        assert first["imported"] == 1
+        [run] = _runs(work, "a")
+        assert run.info.status == "RUNNING" and run.info.end_time is None
+        assert work["sync"]()["updated"] == 0  # nothing changed: nothing written
+        gate.write_text("go")
+        assert proc.wait(60) == 0
+    finally:
+        proc.kill()
+    done = work["sync"]()
+    assert (done["imported"], done["updated"]) == (0, 1)
+    [run] = _runs(work, "a")
+    assert run.info.status == "FINISHED" and run.info.end_time >= run.info.start_time
+    from mlflow.tracking import MlflowClient
+
+    client = MlflowClient(work["uri"])
+    assert [m.value for m in sorted(client.get_metric_history(run.info.run_id, "loss"), key=lambda m: m.step)] == \
+        [1.0, 0.5, 1.0 / 3]
+    assert "out.txt" in {a.path for a in client.list_artifacts(run.info.run_id)}
+    again = work["sync"]()
+    assert (again["imported"], again["updated"]) == (0, 0)
+    assert len(client.get_metric_history(run.info.run_id, "loss")) == 3  # no point logged twice
+
+
+def test_killed_attempt_then_rerun_leaves_one_finished_run(work):
+    proc = _job(work, "b", work["root"] / "never")
+    work["sync"]()
+    assert _runs(work, "b")[0].info.status == "RUNNING"
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(30)
+    assert json.loads((work["runs"] / "b.json").read_text())["status"] == "RUNNING"  # the record saw nothing
+    work["sync"]()
+    [killed] = _runs(work, "b")
+    assert killed.info.status == "KILLED"  # its process is gone: never left RUNNING
+    gate = work["root"] / "go"
+    gate.write_text("go")
+    rerun = _job(work, "b", gate)  # the next invocation re-runs the job: same record path, new attempt
+    assert rerun.wait(60) == 0
+    out = work["sync"]()
+    assert (out["imported"], out["deleted"]) == (1, 1)
+    [run] = _runs(work, "b")
+    assert run.info.status == "FINISHED" and run.info.run_id != killed.info.run_id
+    assert len(_runs(work, "b", deleted=True)) == 2  # the killed attempt is in MLflow's trash, not active
+
+
+def test_final_sync_ends_a_provisional_record_killed(work):
+    proc = _job(work, "c", work["root"] / "never")
+    try:
+        work["sync"]()
+        assert _runs(work, "c")[0].info.status == "RUNNING"
+        work["sync"](final=True)  # the invocation ended (e.g. on a cluster, where the pid says nothing)
+        [run] = _runs(work, "c")
+        assert run.info.status == "KILLED"
+    finally:
+        proc.kill()
+        proc.wait(30)
+
+
+def _sync_worker(args):
+    uri, runs, registry, root, n = args
+    os.chdir(root)
+    for _ in range(n):
+        tracking.sync_records(uri, PLAN, runs, registry, artifact_root=Path(root) / "results" / "mlartifacts")
+    return True
+
+
+def test_concurrent_syncs_while_jobs_change_duplicate_nothing(work):
+    gate = work["root"] / "go"
+    jobs = [_job(work, f"j{i}", gate) for i in range(3)]
+    args = (work["uri"], str(work["runs"]), str(work["registry"]), str(work["root"]), 4)
+    ctx = multiprocessing.get_context("spawn")
+    with ctx.Pool(2) as pool:
+        pending = pool.map_async(_sync_worker, [args, args])
+        time.sleep(1.0)
+        gate.write_text("go")  # the jobs finish while the two syncs interleave
+        assert all(p.wait(60) == 0 for p in jobs)
+        assert pending.get(300) == [True, True]
+    work["sync"]()
+    runs = _runs(work)
+    uids = [r.data.tags["redsup.job_uid"] for r in runs]
+    assert len(runs) == 3 and len(set(uids)) == 3
+    assert {r.info.status for r in runs} == {"FINISHED"}
+    assert len(_runs(work, deleted=True)) == 3  # none created and deleted on the way either
+
+
+def test_live_sync_thread_follows_the_records(work):
+    live = tracking.LiveSync(work["sync"], [work["runs"]], interval_s=0.2).start()
+    try:
+        gate = work["root"] / "go"
+        proc = _job(work, "d", gate)
+        deadline = time.monotonic() + 60
+        while not (work["registry"].exists() and _runs(work, "d")):
+            assert time.monotonic() < deadline, "live sync never imported the running job"
+            time.sleep(0.2)
+        assert _runs(work, "d")[0].info.status == "RUNNING"
+        gate.write_text("go")
+        assert proc.wait(60) == 0
+        while _runs(work, "d")[0].info.status != "FINISHED":
+            assert time.monotonic() < deadline, "live sync never saw the job finish"
+            time.sleep(0.2)
+    finally:
+        live.stop()
+    assert live.syncs >= 2 and len(_runs(work, "d")) == 1
+
+
+def test_record_status_rules():
+    here = {"host": __import__("socket").gethostname()}
+    alive = {"status": "RUNNING", "job": {**here, "pid": os.getpid()}}
+    dead = {"status": "RUNNING", "job": {**here, "pid": 2 ** 22 + 12345}}
+    elsewhere = {"status": "RUNNING", "job": {"host": "other-node", "pid": 1}}
+    assert tracking.record_status(alive) == "RUNNING" and tracking.record_status(alive, final=True) == "KILLED"
+    assert tracking.record_status(dead) == "KILLED"
+    assert tracking.record_status(elsewhere) == "RUNNING" and tracking.record_status(elsewhere, True) == "KILLED"
+    assert tracking.record_status({"status": "FAILED"}, final=True) == "FAILED"
+
+
+def test_provisional_record_names_its_attempt(tmp_path):
+    with runlog.child_run(tmp_path / "r.json", "world", "x", rule="r", wildcards={}, config={}) as run:
+        provisional = json.loads((tmp_path / "r.json").read_text())
+        assert provisional["status"] == "RUNNING" and provisional["job"]["pid"] == os.getpid()
+        run.log_metric("m", 1.0)
+    final = json.loads((tmp_path / "r.json").read_text())
+    assert final["status"] == "FINISHED" and final["job"] == provisional["job"] and len(final["job"]["uid"]) == 32

@@ -1,0 +1,161 @@
+"""Per-job benchmarks (redsup.benchmarks) and the table view of the MLflow store: every child run tagged with
+every table it serves, the one-click filter per table, table files on the parent, job time and memory as
+metrics. Hand-made records and benchmark files, no workflow run."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("mlflow")
+
+from redsup import benchmarks, runlog, tracking  # noqa: E402
+
+HEADER = "s\th:m:s\tmax_rss\tmax_vms\tmax_uss\tmax_pss\tio_in\tio_out\tmean_load\tcpu_time\n"
+T1, T2 = "mccraith_ch3_table1", "mccraith_ch3_table2"  # velocity: result results/velocity/<run>/metrics.json
+PLAN = {"stages": {"velocity": "ch. 3"}, "parents": [{"name": T1, "stage": "velocity"},
+                                                     {"name": T2, "stage": "velocity"}]}
+
+
+def _bench(path: Path, s, rss, cpu):
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(HEADER + f"{s}\t0:00:01\t{rss}\t900.0\t{rss}\t{rss}\t0.1\t0.2\t50.0\t{cpu}\n")
+
+
+# ------------------------------------------------------------------------------------- benchmarks
+def test_read_benchmark_and_job_metrics(tmp_path):
+    _bench(tmp_path / "a.tsv", 12.5, 310.25, 20.0)
+    assert benchmarks.job_metrics(tmp_path / "a.tsv") == {"job_wall_s": 12.5, "job_max_rss_mb": 310.25,
+                                                          "job_cpu_s": 20.0}
+    (tmp_path / "b.tsv").write_text(HEADER + "0.4\t0:00:00\tNA\tNA\tNA\tNA\tNA\tNA\tNA\t0.3\n")
+    assert benchmarks.job_metrics(tmp_path / "b.tsv") == {"job_wall_s": 0.4, "job_cpu_s": 0.3}  # no NaN metric
+    (tmp_path / "c.tsv").write_text(HEADER)
+    with pytest.raises(ValueError, match="c.tsv"):
+        benchmarks.read_benchmark(tmp_path / "c.tsv")
+
+
+def test_benchmark_path_mirrors_the_run_record():
+    assert benchmarks.benchmark_path("results/runs/raw/world_kitti/train_000.json", "world_scene") == \
+        Path("results/benchmarks/world_scene/raw/world_kitti/train_000.tsv")
+
+
+def test_summary_per_rule_and_stage_sorted_by_total(tmp_path):
+    root = tmp_path / "benchmarks"
+    _bench(root / "world_scene/raw/d/train_000.tsv", 10.0, 100.0, 9.0)
+    _bench(root / "world_scene/raw/d/train_001.tsv", 30.0, 250.0, 29.0)
+    _bench(root / "train_depth/depth/models/d/M.tsv", 25.0, 900.0, 48.0)
+    _bench(root / "table/tables/t.tsv", 1.0, 80.0, 1.0)
+    _bench(root / "benchmark_summary/tables/run_time.tsv", 99.0, 1.0, 1.0)  # its own file: excluded
+    stages = {"world_scene": "world", "train_depth": "depth", "table": "tables"}
+    jobs = benchmarks.collect(root, stages, exclude=("benchmark_summary",))
+    assert len(jobs) == 4
+    rules = benchmarks.summarise(jobs, "rule")
+    assert [r["rule"] for r in rules] == ["world_scene", "train_depth", "table"]
+    ws = rules[0]
+    assert (ws["jobs"], ws["total_s"], ws["mean_s"], ws["max_s"], ws["cpu_s"], ws["peak_rss_mb"]) == \
+        (2, 40.0, 20.0, 30.0, 38.0, 250.0)
+    assert ws["stage"] == "world"
+    by_stage = benchmarks.summarise(jobs, "stage")
+    assert [(r["stage"], r["total_s"]) for r in by_stage] == [("world", 40.0), ("depth", 25.0), ("tables", 1.0)]
+    md, png = tmp_path / "run_time.md", tmp_path / "run_time.png"
+    benchmarks.write_summary(root, md, png, stages, exclude=("benchmark_summary",))
+    text = md.read_text()
+    assert "66.0 job-seconds" in text and "| world_scene | world | 2 | 40.0 | 60.6 % | 20.00 | 30.00 | 38.0 | 250.0 |" \
+        in text
+    assert text.index("| world |") < text.index("| depth |") < text.index("| tables |")
+    assert png.stat().st_size > 5000
+    with pytest.raises(ValueError, match="no benchmark files"):
+        benchmarks.write_summary(tmp_path / "none", md, png, stages)
+
+
+# ------------------------------------------------------------------------------- tables in MLflow
+def _child(runs: Path, run: str, parent: str, note: str = ""):
+    with runlog.child_run(runs / "velocity" / run / "metrics.json", parent, run, rule="velocity_mlp",
+                          wildcards={"run": run}, config={"profile": "tiny"}, params={"note": note}) as rec:
+        rec.log_metric("E_v", 1.0)
+
+
+def _table(runs: Path, table: str, rows: dict):
+    with runlog.child_run(runs / "tables" / f"{table}.json", table, "table", rule="table",
+                          wildcards={"table": table}, config={"profile": "tiny"},
+                          params={"rows": json.dumps(rows)}):
+        pass
+
+
+def _filtered(client, reg, table):
+    return client.search_runs(list(reg["experiments"].values()), tracking.table_filter(table))
+
+
+@pytest.fixture()
+def work(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setenv("MLFLOW_DISABLE_TELEMETRY", "true")
+    results = tmp_path / "results"
+    return {"runs": results / "runs", "results": results, "uri": f"sqlite:///{tmp_path}/results/mlflow.db",
+            "registry": results / "mlflow" / "registry.json"}
+
+
+def test_every_table_filter_returns_exactly_its_runs(work):
+    from mlflow.tracking import MlflowClient
+
+    runs, results = work["runs"], work["results"]
+    _child(runs, "shared", T1)          # served by both tables, parent: the first
+    _child(runs, "only2", T2)
+    _child(runs, "unused", T1)          # no row reads it
+    _table(runs, T1, {"row a": ["shared"]})
+    _table(runs, T2, {"row a": ["shared@3"], "row b": ["only2"]})
+    _bench(results / "benchmarks/velocity_mlp/velocity/shared/metrics.tsv", 7.5, 123.0, 6.0)
+    (results / "tables").mkdir(parents=True)
+    (results / "tables" / f"{T2}.md").write_text("| x |\n")
+    (results / "tables" / f"{T2}.csv").write_text("x\n1\n")
+    (results / "figures").mkdir()
+    (results / "figures" / f"{T2}.png").write_bytes(b"\x89PNG fake")
+    sync = lambda: tracking.sync_records(work["uri"], PLAN, runs, work["registry"], table_ids=[T1, T2],  # noqa: E731
+                                         artifact_root=results / "mlartifacts")
+    reg = sync()
+    assert reg["imported"] == 5 and reg["parents_with_new_artifacts"] == 1
+    client = MlflowClient(work["uri"])
+    assert sorted(r.info.run_name for r in _filtered(client, reg, T1)) == ["shared"]
+    assert sorted(r.info.run_name for r in _filtered(client, reg, T2)) == ["only2", "shared"]
+    shared = _filtered(client, reg, T1)[0]
+    assert shared.data.tags["redsup.tables"] == f"{T1},{T2}"
+    assert shared.data.tags["redsup.record_path"] == "results/runs/velocity/shared/metrics.json"
+    assert shared.data.metrics["job_wall_s"] == 7.5 and shared.data.metrics["job_max_rss_mb"] == 123.0
+    parent2 = client.get_run(reg["parents"][T2])
+    assert {a.path for a in client.list_artifacts(parent2.info.run_id, "table")} == \
+        {f"table/{T2}.md", f"table/{T2}.csv"}
+    assert {a.path for a in client.list_artifacts(parent2.info.run_id, "figure")} == {f"figure/{T2}.png"}
+
+    # benchmark written after the first import: the next sync adds the metrics; nothing is imported twice
+    _bench(results / "benchmarks/velocity_mlp/velocity/only2/metrics.tsv", 2.0, 50.0, 1.5)
+    again = sync()
+    assert (again["imported"], again["updated"], again["parents_with_new_artifacts"]) == (0, 1, 0)
+    only2 = [r for r in _filtered(client, reg, T2) if r.info.run_name == "only2"][0]
+    assert only2.data.metrics["job_wall_s"] == 2.0
+
+    # a re-run rewrites only2's record: a new child serves T2, the superseded one loses its tags
+    _child(runs, "only2", T2, note="rerun")
+    third = sync()
+    assert third["imported"] == 1
+    served = _filtered(client, reg, T2)
+    assert len(served) == 2 and {r.data.params["note"] for r in served if r.info.run_name == "only2"} == {"rerun"}
+    all_only2 = client.search_runs(list(reg["experiments"].values()), "attributes.run_name = 'only2'")
+    assert len(all_only2) == 2
+    old = [r for r in all_only2 if r.data.params["note"] == ""][0]
+    assert not any(k.startswith("redsup.table") for k in old.data.tags)
+    assert sync()["imported"] == 0 and sync()["updated"] == 0
+
+
+def test_parent_description_names_the_filter(work, monkeypatch):
+    from mlflow.tracking import MlflowClient
+
+    monkeypatch.delenv("MLFLOW_TRACKING_URI", raising=False)
+    config = {"mlflow": {"tracking_uri": work["uri"], "artifact_root": str(work["results"] / "mlartifacts")}}
+    reg = tracking.sync_from_config(config, work["runs"], work["registry"])
+    client = MlflowClient(work["uri"])
+    note = client.get_run(reg["parents"][T2]).data.tags["mlflow.note.content"]
+    assert tracking.table_filter(T2) in note and "tags.`redsup.table.mccraith_ch3_table2` = '1'" in note
+    assert tracking.table_filter(T2) not in client.get_run(reg["parents"]["world"]).data.tags["mlflow.note.content"]
+    # the filter from the description is a valid MLflow search (no runs yet)
+    assert _filtered(client, reg, T2) == []

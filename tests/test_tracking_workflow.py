@@ -1,0 +1,92 @@
+"""On the tiny build (conftest.built): per-job benchmarks and run_time.md, and every table's configurations
+found in MLflow by the table's tag filter, exactly."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+import yaml
+
+from conftest import ROOT
+
+pytestmark = pytest.mark.workflow
+
+
+@pytest.fixture(scope="module")
+def store(built):
+    from mlflow.tracking import MlflowClient
+
+    registry = json.loads((built / "results" / "mlflow" / "registry.json").read_text())
+    client = MlflowClient(f"sqlite:///{built}/results/mlflow.db")
+    return client, registry
+
+
+def _tiny_config():
+    from redsup import config as config_mod
+
+    raw = yaml.safe_load((ROOT / "config.yaml").read_text())
+    raw["profile"] = "tiny"
+    return config_mod.resolve(raw)
+
+
+def _scenes_of(cfg):
+    """As common.smk counts world scenes (the tiny profile has world datasets only)."""
+    def scenes_of(dataset):
+        assert cfg["datasets"][dataset]["kind"] == "world"
+        counts = cfg["datasets"][dataset].get("scenes", {})
+        return [f"{s}_{i:03d}" for s in ("train", "test", "long") for i in range(counts.get(s, 0))]
+    return scenes_of
+
+
+def test_run_time_table_and_figure(built):
+    text = (built / "results" / "tables" / "run_time.md").read_text()
+    n_bench = len(list((built / "results" / "benchmarks").rglob("*.tsv")))
+    # every job but benchmark_summary's own (written after its table)
+    assert f"From {n_bench - 1} Snakemake benchmark files" in text
+    for rule in ("world_scene", "prepare_camera", "train_depth", "table", "scorecard"):
+        assert f"| {rule} |" in text
+    for stage in ("world", "prepare", "depth", "tables"):
+        assert f"| {stage} |" in text
+    stage_rows = [line for line in text.split("## Per rule")[0].splitlines() if line.startswith("| ")][1:]
+    totals = [float(line.split("|")[3]) for line in stage_rows]
+    assert totals == sorted(totals, reverse=True) and totals[0] > 0
+    assert (built / "results" / "figures" / "run_time.png").stat().st_size > 10_000
+
+
+def test_every_child_has_its_job_time_and_memory(store):
+    client, registry = store
+    children = client.search_runs(list(registry["experiments"].values()), "tags.`redsup.role` = 'child'",
+                                  max_results=5000)
+    assert len(children) > 50
+    missing = [r.info.run_name for r in children if "job_wall_s" not in r.data.metrics]
+    assert not missing
+    assert all(r.data.metrics["job_wall_s"] > 0 for r in children)
+    with_rss = [r for r in children if "job_max_rss_mb" in r.data.metrics]
+    assert len(with_rss) > len(children) // 2 and all(20 < r.data.metrics["job_max_rss_mb"] < 8000 for r in with_rss)
+
+
+def test_every_table_filter_returns_exactly_its_rows_runs(built, store):
+    from redsup import tracking
+    from redsup.tables.contract import all_rows, plan_of, table_ids
+
+    client, registry = store
+    cfg = _tiny_config()
+    rows = all_rows(cfg, _scenes_of(cfg))
+    assert set(rows) == set(table_ids())
+    experiments = list(registry["experiments"].values())
+    for table, table_rows in rows.items():
+        plan = plan_of(table)
+        expected = {str(Path("results/runs") / Path(plan.result_path(run)).relative_to("results"))
+                    for _, run, _ in table_rows}
+        found = client.search_runs(experiments, tracking.table_filter(table), max_results=5000)
+        paths = [r.data.tags["redsup.record_path"] for r in found]
+        assert len(paths) == len(set(paths)), table  # no duplicates
+        assert set(paths) == expected, table
+        assert all(r.info.status == "FINISHED" for r in found)
+        parent = client.get_run(registry["parents"][table])
+        assert tracking.table_filter(table) in parent.data.tags["mlflow.note.content"]
+        artifacts = {a.path for a in client.list_artifacts(parent.info.run_id, "table")}
+        assert {f"table/{table}.md", f"table/{table}.csv"} <= artifacts, table
+        if (built / "results" / "figures" / f"{table}.png").exists():
+            assert [a.path for a in client.list_artifacts(parent.info.run_id, "figure")] == [f"figure/{table}.png"]

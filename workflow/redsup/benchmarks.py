@@ -1,0 +1,154 @@
+"""Per-job measurements from Snakemake's ``benchmark:`` files: where the time and memory of a run go.
+
+Every rule writes ``results/benchmarks/<rule>/<its log path below results/logs, mirrored>.tsv`` (one line per
+job: wall seconds ``s``, ``max_rss`` in MB, ``cpu_time`` in s, ...). ``summarise`` adds them up per rule and
+per stage (the rule file that defines the rule: world, prepare, velocity, depth, ...), sorted by total wall
+time; ``write_summary`` writes the markdown table and the figure of ``rule benchmark_summary``.
+``benchmark_path`` / ``job_metrics`` give the file and the MLflow metrics of one job's run record.
+
+Torch-free and MLflow-free (imported by the tracking import and the summary job).
+"""
+from __future__ import annotations
+
+import csv
+import math
+from collections.abc import Mapping
+from pathlib import Path
+
+BENCHMARK_ROOT = "results/benchmarks"
+RUNS_ROOT = "results/runs"
+# benchmark column -> MLflow metric of the job's run
+METRIC_NAMES = {"s": "job_wall_s", "max_rss": "job_max_rss_mb", "cpu_time": "job_cpu_s"}
+
+
+def _number(text: str | None) -> float:
+    try:
+        value = float(text)
+    except (TypeError, ValueError):
+        return math.nan  # Snakemake writes "NA" / "-" where it could not measure (very short jobs)
+    return value
+
+
+def read_benchmark(path: str | Path) -> dict[str, float]:
+    """One benchmark file as {column: value} (the last line: a job repeated with ``repeat()`` writes several)."""
+    with open(path, newline="") as fh:
+        rows = list(csv.DictReader(fh, delimiter="\t"))
+    if not rows:
+        raise ValueError(f"{path}: benchmark file without a measurement line")
+    row = rows[-1]
+    return {key: _number(row.get(key)) for key in ("s", "max_rss", "max_vms", "max_uss", "max_pss", "io_in",
+                                                   "io_out", "mean_load", "cpu_time")}
+
+
+def benchmark_path(record_path: str | Path, rule: str, *, runs_root: str | Path = RUNS_ROOT,
+                   benchmark_root: str | Path = BENCHMARK_ROOT) -> Path:
+    """The benchmark file of the job that wrote run record ``record_path`` (rules name both after their log:
+    ``results/runs/<x>.json`` <-> ``results/benchmarks/<rule>/<x>.tsv``)."""
+    rel = Path(record_path).relative_to(runs_root)
+    return Path(benchmark_root) / rule / rel.with_suffix(".tsv")
+
+
+def job_metrics(path: str | Path) -> dict[str, float]:
+    """MLflow metrics of one job from its benchmark file (finite values only)."""
+    values = read_benchmark(path)
+    return {metric: values[col] for col, metric in METRIC_NAMES.items() if math.isfinite(values[col])}
+
+
+def collect(root: str | Path, rule_stages: Mapping[str, str], exclude: tuple[str, ...] = ()) -> list[dict]:
+    """Every benchmark file under ``root``: one dict per job (rule, stage, job, wall_s, max_rss_mb, cpu_s)."""
+    root = Path(root)
+    jobs = []
+    for path in sorted(root.rglob("*.tsv")) if root.exists() else []:
+        rule = path.relative_to(root).parts[0]
+        if rule in exclude:
+            continue
+        values = read_benchmark(path)
+        jobs.append({"rule": rule, "stage": rule_stages.get(rule, "unknown"),
+                     "job": str(path.relative_to(root / rule).with_suffix("")),
+                     "wall_s": values["s"], "max_rss_mb": values["max_rss"], "cpu_s": values["cpu_time"]})
+    return jobs
+
+
+def summarise(jobs: list[dict], by: str) -> list[dict]:
+    """Totals per ``by`` ("rule" or "stage"), sorted by total wall time (largest first): jobs, total / mean /
+    max wall s, total CPU s, peak RSS MB (NaN where no job of the group had a memory reading)."""
+    groups: dict[str, list[dict]] = {}
+    for job in jobs:
+        groups.setdefault(job[by], []).append(job)
+    out = []
+    for name, members in groups.items():
+        walls = [j["wall_s"] for j in members if math.isfinite(j["wall_s"])]
+        cpus = [j["cpu_s"] for j in members if math.isfinite(j["cpu_s"])]
+        rss = [j["max_rss_mb"] for j in members if math.isfinite(j["max_rss_mb"])]
+        row = {by: name, "jobs": len(members), "total_s": sum(walls),
+               "mean_s": sum(walls) / len(walls) if walls else math.nan, "max_s": max(walls, default=math.nan),
+               "cpu_s": sum(cpus), "peak_rss_mb": max(rss, default=math.nan)}
+        if by == "rule":
+            row["stage"] = members[0]["stage"]
+        out.append(row)
+    return sorted(out, key=lambda r: (-r["total_s"], r[by]))
+
+
+def _fmt(value: float, digits: int = 1) -> str:
+    return "n/a" if not math.isfinite(value) else f"{value:.{digits}f}"
+
+
+def markdown(jobs: list[dict]) -> str:
+    """The run-time table: per stage, then per rule, both sorted by total wall time."""
+    total = sum(j["wall_s"] for j in jobs if math.isfinite(j["wall_s"]))
+    lines = ["# Run time and memory per stage and per rule", "",
+             f"From {len(jobs)} Snakemake benchmark files (results/benchmarks/<rule>/...): {total:.1f} job-seconds "
+             "in all (the sum over jobs; the wall time of a parallel run is less). Peak RSS is the largest "
+             "resident memory of one job of the group.", ""]
+    for by in ("stage", "rule"):
+        rows = summarise(jobs, by)
+        extra = " | stage" if by == "rule" else ""
+        lines += [f"## Per {by}", "",
+                  f"| {by}{extra} | jobs | total s | share | mean s | max s | CPU s | peak RSS MB |",
+                  "|---|" + ("---|" if by == "rule" else "") + "---:|---:|---:|---:|---:|---:|---:|"]
+        for r in rows:
+            share = f"{100 * r['total_s'] / total:.1f} %" if total > 0 else "n/a"
+            stage = f" | {r['stage']}" if by == "rule" else ""
+            lines.append(f"| {r[by]}{stage} | {r['jobs']} | {_fmt(r['total_s'])} | {share} | {_fmt(r['mean_s'], 2)} | "
+                         f"{_fmt(r['max_s'], 2)} | {_fmt(r['cpu_s'])} | {_fmt(r['peak_rss_mb'])} |")
+        lines.append("")
+    return "\n".join(lines)
+
+
+def figure(jobs: list[dict], png: str | Path) -> None:
+    """Two panels: total wall time per rule (coloured by stage) and peak RSS per rule."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    rows = summarise(jobs, "rule")[::-1]  # largest at the top
+    stages = sorted({r["stage"] for r in rows})
+    colours = {s: plt.get_cmap("tab10")(i % 10) for i, s in enumerate(stages)}
+    height = max(3.0, 0.28 * len(rows) + 1.2)
+    fig, (ax_t, ax_m) = plt.subplots(1, 2, figsize=(11, height), sharey=True)
+    names = [r["rule"] for r in rows]
+    ax_t.barh(names, [r["total_s"] for r in rows], color=[colours[r["stage"]] for r in rows])
+    ax_t.set_xlabel("total wall time over jobs (s)")
+    ax_m.barh(names, [r["peak_rss_mb"] if math.isfinite(r["peak_rss_mb"]) else 0 for r in rows],
+              color=[colours[r["stage"]] for r in rows])
+    ax_m.set_xlabel("peak RSS of one job (MB)")
+    handles = [plt.Rectangle((0, 0), 1, 1, color=colours[s]) for s in stages]
+    ax_m.legend(handles, stages, title="stage", loc="lower right", fontsize=8)
+    fig.suptitle(f"Where the run's time goes: {len(jobs)} jobs")
+    fig.tight_layout()
+    Path(png).parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(png, dpi=100)
+    plt.close(fig)
+
+
+def write_summary(root: str | Path, md: str | Path, png: str | Path, rule_stages: Mapping[str, str],
+                  exclude: tuple[str, ...] = ()) -> list[dict]:
+    """``markdown`` to ``md`` and ``figure`` to ``png``; returns the per-rule rows."""
+    jobs = collect(root, rule_stages, exclude)
+    if not jobs:
+        raise ValueError(f"{root}: no benchmark files (every rule declares benchmark:; did any job run?)")
+    Path(md).parent.mkdir(parents=True, exist_ok=True)
+    Path(md).write_text(markdown(jobs))
+    figure(jobs, png)
+    return summarise(jobs, "rule")
