@@ -28,13 +28,13 @@ def _scenes_of(cfg, drop=()):
     """scenes_of as common.smk counts world scenes; ``drop``: (dataset, split) pairs to leave out."""
     def scenes_of(dataset):
         counts = cfg["datasets"][dataset].get("scenes", {})
-        return [f"{s}_{i:03d}" for s in ("train", "test", "long") for i in range(counts.get(s, 0))
+        return [f"{s}_{i:03d}" for s in ("train", "val", "test", "long") for i in range(counts.get(s, 0))
                 if (dataset, s) not in drop]
     return scenes_of
 
 
-DEPTH_TABLES = [f"mccraith_ch4_table{i}" for i in range(1, 8)] + ["mccraith_ch4_fig4", "mccraith_ch4_fig5",
-                                                                   "galteland_table4_4", "galteland_table5_1"]
+DEPTH_TABLES = [f"mccraith_ch4_table{i}" for i in range(1, 8)] + ["mccraith_ch4_fig4", "mccraith_ch4_fig5"] + [
+    f"galteland_table4_{i}" for i in range(1, 5)] + ["galteland_table5_1"]
 
 
 def test_rows_of_every_table_at_default(cfg):
@@ -49,12 +49,20 @@ def test_rows_of_every_table_at_default(cfg):
     labels = {r.label for r in rows["mccraith_ch4_table5"]}
     assert labels >= {"ours | M", "ours | S", "ours | MS", "Monodepth V2 [9] | S"}
     assert [r.label for r in rows["mccraith_ch4_table7"]] == ["baseline | 0", "Ours | 20", "Ours | 50"]
-    assert len(rows["galteland_table5_1"]) == 27  # 9 rows x 3 seeds
-    assert [r.label for r in rows["galteland_table4_4"]] == ["Front only"] * 3 + ["Front+Back"] * 3
+    assert len(rows["galteland_table5_1"]) == 9 + 2  # Manydepth 3 x 3 domains, Feature Depth on Lyft and DDAD
+    assert {r.spec.model_mode for r in rows["galteland_table5_1"]} == {"MD", "FD"}
+    assert [r.label for r in rows["galteland_table4_4"]] == ["Front only", "Front+Back"]
+    assert [r.spec.model for r in rows["galteland_table4_4"]] == ["world_lyft/MD", "world_lyft/MD_frontback"]
+    t41 = rows["galteland_table4_1"]
+    assert [r.label for r in t41] == ["Manydepth", "Feature Depth", "Manydepth single-frame teacher (ours)"]
+    assert [r.spec.branch for r in t41] == ["", "", "teacher"]
+    assert t41[2].spec.name == t41[0].spec.name + "_teacher" and t41[0].spec.key() != t41[2].spec.key()
     available, cameras = plan._available(cfg, _scenes_of(cfg))
+    assert available["world_kitti"]["val"] == 1
     models = configs.trained_models(cfg["depth"], {d: a["train"] for d, a in available.items()}, cameras)
-    assert set(models) == {"world_kitti/M", "world_kitti/S", "world_kitti/MS", "world_cityscapes/M", "world_lyft/M",
-                           "world_lyft/M_frontback", "world_ddad/M", "world_naplab/M"}
+    assert set(models) == {"world_kitti/M", "world_kitti/S", "world_kitti/MS", "world_cityscapes/M", "world_kitti/MD",
+                           "world_kitti/FD", "world_lyft/MD", "world_lyft/MD_frontback", "world_lyft/FD",
+                           "world_ddad/MD", "world_ddad/FD", "world_naplab/MD"}
 
 
 def test_shared_runs(cfg):
@@ -98,7 +106,7 @@ def test_tables_shrink_with_missing_data(cfg):
     assert not rows["mccraith_ch4_fig4"]
     assert not any(r.label.startswith("Odometry") for r in rows["mccraith_ch4_table6"])
     assert {r.label for r in rows["mccraith_ch4_table5"]} == {"ours | M", "Monodepth V2 [9] | M"}
-    assert len(rows["galteland_table5_1"]) == 4 * 3
+    assert len(rows["galteland_table5_1"]) == 4 + 1  # Manydepth Lyft / NAP-lab x Lyft / NAP-lab, Feature Depth Lyft
 
 
 def test_labels():
@@ -238,4 +246,5 @@ def test_seed_rows_are_averaged_with_their_spread(cfg):
     assert configs.parse_model("world_lyft/M_frontback/seed2") == ("world_lyft", "M_frontback", 2)
     with pytest.raises(ValueError, match="not a depth model id"):
         configs.parse_model("world_lyft/M/2")
-    assert plan.rows(cfg, _scenes_of(cfg))["galteland_table4_4"][1][1].startswith("baseline_world_lyft-M-seed1_")
+    assert plan.rows(cfg, _scenes_of(cfg))["galteland_table4_4"][1][1].startswith("baseline_world_lyft-MD_frontback_")
+    assert configs.seed_models("world_lyft/MD", 2)[1] == "world_lyft/MD/seed1"

@@ -18,7 +18,7 @@ PROMISED = (
     + [f"mccraith_ch4_table{i}" for i in range(1, 8)] + ["mccraith_ch4_fig4", "mccraith_ch4_fig5"]
     + ["mccraith_ch5_fig1"] + [f"mccraith_ch5_table{i}" for i in range(1, 5)]
     + [f"mccraith_ch6_table{i}" for i in range(1, 5)] + [f"mccraith_ch7_table{i}" for i in range(1, 4)]
-    + ["galteland_table4_4", "galteland_table5_1"]
+    + [f"galteland_table4_{i}" for i in range(1, 5)] + ["galteland_table5_1"]
 )
 
 

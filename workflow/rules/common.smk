@@ -12,7 +12,7 @@ config.update(_resolved)
 # conda env of each stage's rules (envs/<stage>.yaml, pinned; used with --sdm conda, e.g. the SLURM profile)
 ENVS = {stage: f"../../envs/{stage}.yaml" for stage in ("data", "velocity", "depth", "calibration", "lifting",
                                                           "detector", "tables")}
-SPLITS = ("train", "test", "long")
+SPLITS = ("train", "val", "test", "long")
 CLIP_SPLIT_NAMES = list(config["velocity_clips"]["splits"])
 DET_LEVELS = ("coco", "cityscapes")
 
@@ -39,7 +39,7 @@ if _unknown_clip_splits:
 
 wildcard_constraints:
     dataset=r"[A-Za-z0-9_]+",
-    scene=r"(train|test|long)_[A-Za-z0-9_]+",
+    scene=r"(train|val|test|long)_[A-Za-z0-9_]+",
     camera=r"cam_front|cam_front_right|cam_back",
     level=r"coco|cityscapes",
     split="|".join(CLIP_SPLIT_NAMES),

@@ -5,6 +5,8 @@
 #                (the mode's model of calibration.model_dataset when set, else of the dataset)
 # depth_eval     results/depth/eval/{run}.json                      one configuration (a child run)
 # depth_figure   results/figures/<id>.png                           Figs. 4 and 5 (their tables: rule table)
+# galteland_figure results/figures/galteland_fig4_<n>.png           Galteland's progression / qualitative figures
+#                (depth.figures; training runs of Manydepth / Feature Depth log val metrics per epoch)
 # The tables are data (config `depth.tables.<table id>`), expanded by redsup.depth.plan; rows that need the
 # same run share one depth_eval job.
 import re
@@ -14,6 +16,8 @@ import redsup.depth.plan as depth_plan
 DEPTH_RUNS = depth_plan.runs(config, scenes_of)
 DEPTH_MODELS = depth_plan.models(config, scenes_of)  # <dataset>/<mode>[/seed<k>]
 DEPTH_FIGURES = [t for t in FIGURE_IDS if "figure" in config["depth"]["tables"].get(t, {})]
+GALTELAND_FIGURES = depth_plan.figures(config, scenes_of)  # depth.figures: progression / qualitative PNGs
+FIGURE_IDS.extend(f for f in GALTELAND_FIGURES if f not in FIGURE_IDS)  # targets of rule all (tables.smk)
 
 
 rule train_depth:
@@ -107,3 +111,25 @@ rule depth_figure:
         ENVS["depth"]
     script:
         "../scripts/depth_figure.py"
+
+
+rule galteland_figure:
+    input:
+        unpack(lambda wc: depth_plan.figure_files(config, wc.figure, scenes_of)),
+    output:
+        "results/figures/{figure}.png",
+    log:
+        "results/logs/figures/{figure}.log",
+        run="results/runs/figures/{figure}.json",
+    benchmark:
+        "results/benchmarks/galteland_figure/figures/{figure}.tsv",
+    wildcard_constraints:
+        figure="|".join(GALTELAND_FIGURES) or "(?!)",
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    conda:
+        ENVS["depth"]
+    script:
+        "../scripts/depth_galteland_figure.py"

@@ -26,9 +26,11 @@ with child_run(sm.log.run, tables[0], spec.name, rule=sm.rule, wildcards=dict(sm
     for k, (scene_dir, npz, gt) in enumerate(zip(sm.input.scenes, sm.input.images, sm.input.gt)):
         seq = data.load_sequence(npz, scene_dir=scene_dir, stereo_npz=stereo[k] if stereo else None,
                                  stereo_baseline=meta.get("stereo_baseline"))
+        seq = data.resize_sequence(seq, (int(meta["height"]), int(meta["width"])))  # the model's input size
         seqs.append(experiments.EvalSequence(seq, data.read_gt_depth(gt)))
     result = experiments.run_spec(spec, models, meta, seqs, cfg,
                                   progress=lambda i, n: print(f"{i}/{n}", flush=True) if i % 10 == 0 else None)
+    result["timing"] = experiments.timing_context(sm.threads, (int(meta["height"]), int(meta["width"])))
     curve_name = "adapt_loss" if spec.kind != "direct" else "direct_loss"
     for step, value in enumerate(result["loss_curve"], start=1):
         run.log_metric(curve_name, value, step=step)

@@ -5,11 +5,12 @@ sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821
 
 import time  # noqa: E402
 
+import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from redsup.depth import checkpoint, data  # noqa: E402
 from redsup.depth.plan import model_parent  # noqa: E402
-from redsup.depth.experiments import predict_sequence  # noqa: E402
+from redsup.depth.experiments import predict_sequence, resize_depth  # noqa: E402
 from redsup.fileio import save_npz_atomic  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
 
@@ -25,7 +26,11 @@ with child_run(sm.log.run, parent, f"predict {name}", rule=sm.rule, wildcards=di
     models, meta = checkpoint.load(sm.input.model, device)
     images, K = data.read_prepared(sm.input.images)
     start = time.perf_counter()
-    depth = predict_sequence(models, images, meta, device=device)
+    size = (int(meta["height"]), int(meta["width"]))  # a system trained at a reduced input size sees its size
+    seq = data.resize_sequence(data.Sequence(name, images, K), size)
+    depth = predict_sequence(models, seq.images, meta, device=device, K=seq.K)
+    if size != images.shape[1:3]:  # back to the prepared size (the disparity resized, as the evaluation does)
+        depth = np.stack([resize_depth(d, images.shape[1:3]) for d in depth]).astype(np.float32)
     seconds = time.perf_counter() - start
     save_npz_atomic(sm.output[0], depth=depth, K=K.astype(float))
     stats = {"frames": len(depth), "seconds_per_image": seconds / max(1, len(depth)),

@@ -1,4 +1,5 @@
-"""Snakemake entry point: train one depth + pose model (Monodepth2 recipe) on a dataset's training scenes."""
+"""Snakemake entry point: train one depth model (its mode's system: Monodepth2, Manydepth or Feature Depth) on a
+dataset's training scenes; systems with validation passes pick their best epoch on the val split."""
 import sys
 
 sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821  (log first)
@@ -7,7 +8,7 @@ import zlib  # noqa: E402
 
 import torch  # noqa: E402
 
-from redsup.depth import checkpoint, data, networks, training  # noqa: E402
+from redsup.depth import checkpoint, data, experiments, systems, training  # noqa: E402
 from redsup.depth.configs import parse_model  # noqa: E402
 from redsup.depth.plan import model_parent  # noqa: E402
 from redsup.depth.experiments import loss_settings  # noqa: E402
@@ -23,12 +24,10 @@ sources = list(mode_cfg["sources"])
 device = cfg["device"] if cfg["device"] != "auto" else ("cuda" if torch.cuda.is_available() else "cpu")
 seed = int(sm.config["seed"]) + zlib.crc32(f"{dataset}/{mode}".encode()) % 100000  # seed index 0
 seed += 0 if seed_index == 0 else zlib.crc32(sm.wildcards.model.encode()) % 100000
-init_disparity = mode_cfg.get("init_disparity", cfg["model"].get("init_disparity"))
-steps = next((m.get("steps") for m in cfg["models"] if m["dataset"] == dataset and m["mode"] == mode), None)  # override
+model_cfg, tcfg = systems.train_settings(cfg, dataset, mode)
 params = {"dataset": dataset, "mode": mode, "seed_index": seed_index, "sources": sources,
-          "cameras": mode_cfg["cameras"], "seed": seed,
-          "device": device, "model": {**cfg["model"], "init_disparity": init_disparity}, "loss": cfg["loss"],
-          "train": {**cfg["train"], **({"steps": steps} if steps else {})}}
+          "cameras": mode_cfg["cameras"], "seed": seed, "device": device, "model": model_cfg, "loss": cfg["loss"],
+          "train": tcfg}
 
 parent = model_parent(sm.config, f"{dataset}/{mode}")
 with child_run(sm.log.run, parent, f"train {sm.wildcards.model}", rule=sm.rule, wildcards=dict(sm.wildcards),
@@ -40,8 +39,13 @@ with child_run(sm.log.run, parent, f"train {sm.wildcards.model}", rule=sm.rule, 
             seqs.append(data.load_sequence(npz, scene_dir=scene_dir, stereo_npz=stereo[k] if stereo else None,
                                            reversed_order=(cam == "cam_back"), camera=cam,
                                            stereo_baseline=cfg["train"]["stereo_baseline"]))
+    h, w = systems.input_size(seqs[0].size, float(model_cfg.get("input_scale", 1.0)))
+    seqs = [data.resize_sequence(s, (h, w)) for s in seqs]
+    meta = {**model_cfg, "height": h, "width": w, "mode": mode, "sources": sources,
+            "cameras": list(mode_cfg["cameras"]), "dataset": dataset, "train": dict(tcfg), "loss": dict(cfg["loss"]),
+            "seed": seed, "scenes": [str(s) for s in sm.input.scenes]}
     torch.manual_seed(seed)
-    models = networks.build_models(cfg["model"]["base_channels"], cfg["model"]["num_scales"], init_disparity).to(device)
+    models = systems.build(meta).to(device)
     every = int(cfg["train"]["log_every"])
 
     def log_step(step, terms):
@@ -50,21 +54,32 @@ with child_run(sm.log.run, parent, f"train {sm.wildcards.model}", rule=sm.rule, 
         if step % 50 == 0 or step == 1:
             print(f"step {step}: " + ", ".join(f"{k} {v:.4g}" for k, v in terms.items()), flush=True)
 
-    tcfg = params["train"]  # depth.train with this model's steps override
-    summary = training.train(models, seqs, sources, steps=tcfg["steps"], batch_size=tcfg["batch_size"], lr=tcfg["lr"],
-                             decay_at=tcfg["decay_at"], gamma=tcfg["gamma"], flip=tcfg["flip"],
-                             min_speed=tcfg["min_speed"], seed=seed, loss_kwargs=loss_settings(cfg),
-                             callback=log_step, device=device)
-    h, w = seqs[0].size
-    meta = {"base_channels": cfg["model"]["base_channels"], "num_scales": cfg["model"]["num_scales"],
-            "height": h, "width": w, "min_depth": cfg["model"]["min_depth"], "max_depth": cfg["model"]["max_depth"],
-            "mode": mode, "sources": sources, "cameras": list(mode_cfg["cameras"]), "dataset": dataset,
-            "train": dict(tcfg), "loss": dict(cfg["loss"]), "seed": seed,
-            "scenes": [str(s) for s in sm.input.scenes], **summary}
+    validate, val_every = None, 0
+    if int(tcfg["epochs"]) > 0 and sm.input.get("val_images"):
+        val = [experiments.EvalSequence(data.resize_sequence(data.load_sequence(npz, scene_dir=sd), (h, w)),
+                                        data.read_gt_depth(gt))
+               for sd, npz, gt in zip(sm.input.val_scenes, sm.input.val_images, sm.input.val_gt)]
+        val_every = max(1, int(tcfg["steps"]) // int(tcfg["epochs"]))
+
+        def validate(step):  # one validation pass per "epoch": the seven metrics with the step (MLflow curves)
+            metrics = experiments.validation_metrics(models, meta, val, cfg["eval"], cfg["eval"]["frames"]["all"])
+            run.log_metrics({f"val_{k}": v for k, v in metrics.items()}, step=step)
+            print(f"validation at step {step}: " + ", ".join(f"{k} {v:.4g}" for k, v in metrics.items()), flush=True)
+            return metrics
+    elif int(tcfg["epochs"]) > 0:
+        print("no val scenes: no validation passes, the last step's weights are kept")
+
+    summary = training.train(models, seqs, sources, steps=int(tcfg["steps"]), batch_size=int(tcfg["batch_size"]),
+                             lr=float(tcfg["lr"]), decay_at=tcfg["decay_at"], gamma=float(tcfg["gamma"]),
+                             flip=tcfg["flip"], min_speed=tcfg["min_speed"], seed=seed,
+                             loss_kwargs=loss_settings(cfg), callback=log_step, device=device,
+                             criterion=systems.criterion(meta, loss_settings(cfg), int(tcfg["steps"]), seed),
+                             validate=validate, validate_every=val_every)
+    meta.update(summary)
     if "stereo" in sources:  # metres per network unit: evaluate S / MS with this fixed scale (Monodepth2's 5.4)
         metric = seqs[0].extra["stereo_baseline_m"]
         meta.update(stereo_baseline=cfg["train"]["stereo_baseline"],
                     stereo_scale_factor=metric / cfg["train"]["stereo_baseline"])
     checkpoint.save(sm.output[0], models, meta, sm.config)
-    run.log_metrics({k: float(v) for k, v in summary.items()})
-    print(summary)
+    run.log_metrics({k: float(v) for k, v in summary.items() if isinstance(v, (int, float))})
+    print({k: v for k, v in summary.items() if k != "validation"})

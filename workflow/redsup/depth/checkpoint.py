@@ -18,7 +18,7 @@ import torch
 from torch import nn
 
 from redsup import checkpoint
-from redsup.depth import networks
+from redsup.depth import systems
 
 KIND = "depth"
 REQUIRED_META = ("base_channels", "num_scales", "height", "width", "min_depth", "max_depth", "mode")
@@ -26,7 +26,7 @@ REQUIRED_META = ("base_channels", "num_scales", "height", "width", "min_depth", 
 
 def save(path: str | Path, models: Mapping[str, nn.Module], meta: Mapping[str, Any],
          config: Mapping | None = None) -> None:
-    """Write ``models`` (the four sub-networks), ``meta`` and the resolved ``config`` to ``path`` (atomic)."""
+    """Write ``models`` (the system's sub-networks), ``meta`` and the resolved ``config`` to ``path`` (atomic)."""
     missing = [k for k in REQUIRED_META if k not in meta]
     if missing:
         raise ValueError(f"checkpoint meta lacks {missing}")
@@ -37,7 +37,7 @@ def load(path: str | Path, device: str | torch.device = "cpu") -> tuple[nn.Modul
     """(models in eval mode on ``device``, meta) from a checkpoint written by ``save``."""
     data = checkpoint.load(path, KIND)
     meta = dict(data["meta"])
-    models = networks.build_models(int(meta["base_channels"]), int(meta["num_scales"]))
+    models = systems.build(meta)  # meta["system"]: monodepth2 (absent), manydepth, featdepth
     for name, module in models.items():
         module.load_state_dict(data["state"][name])
     return models.to(device).eval(), meta

@@ -42,17 +42,20 @@ class EvalSpec:
     lr: float = 0.0
     steps: int = 0  # sequential / direct
     checkpoints: tuple[int, ...] = (0,)  # instance
+    branch: str = ""  # the system's prediction branch ("": its test-time output; Manydepth "teacher")
 
     def key(self) -> tuple:
         """What identifies the run apart from the checkpoints it is evaluated at."""
-        return (self.kind, self.model, self.data, self.frames, self.sources, self.groups, self.lr, self.steps)
+        return (self.kind, self.model, self.data, self.frames, self.sources, self.groups, self.lr, self.steps,
+                self.branch)
 
     @property
     def name(self) -> str:
         """File-safe unique name (without the checkpoints)."""
         m, d = self.model.replace("/", "-"), self.data.replace("/", "-")
         if self.kind == "instance" and not self.groups:
-            return f"baseline_{m}_on_{d}_{self.frames}" + (f"_{'-'.join(self.sources)}" if self.sources else "")
+            return (f"baseline_{m}_on_{d}_{self.frames}" + (f"_{'-'.join(self.sources)}" if self.sources else "")
+                    + (f"_{self.branch}" if self.branch else ""))
         groups = "-".join(_GROUP_SLUG.get(g, g) for g in self.groups) or "none"
         steps = f"_s{self.steps}" if self.kind != "instance" else ""
         return f"{self.kind}_{m}_on_{d}_{self.frames}_{groups}_lr{self.lr:g}{steps}"
@@ -109,6 +112,11 @@ def groups_label(groups: Seq[str]) -> str:
         return "whole network"
     order = list(GROUP_LABELS)
     return " + ".join(GROUP_LABELS[g] for g in sorted(groups, key=order.index))
+
+
+def system_of(depth_cfg: Mapping, mode: str) -> str:
+    """The depth system a mode trains (``depth.modes.<mode>.system``, default monodepth2; redsup.depth.systems)."""
+    return depth_cfg["modes"][mode].get("system", "monodepth2")
 
 
 def mode_sources(depth_cfg: Mapping, mode: str) -> tuple[str, ...]:
@@ -175,7 +183,7 @@ def plan(rows: Mapping[str, Seq[Row]], order: Seq[str] | None = None
                 first[k], parent[k] = row.spec, table
 
     def base_of(spec: EvalSpec) -> tuple:
-        return (spec.model, spec.data, spec.frames, spec.sources)
+        return (spec.model, spec.data, spec.frames, spec.sources, spec.branch)
 
     adapting = {}
     for k, spec in first.items():  # prefer an adaptation run for the baseline rows
@@ -214,14 +222,24 @@ def split_of(scenes: Seq[str], split: str) -> list[str]:
 
 def train_inputs(config: Mapping, dataset: str, mode: str, scenes: Seq[str]) -> dict[str, list[str]]:
     """Inputs of ``train_depth``: the raw scenes (ego poses, extrinsics) and the prepared images of every
-    camera the mode trains on (``stereo``: the partner images). ``mode`` without the seed part."""
+    camera the mode trains on (``stereo``: the partner images); for a system with validation passes
+    (``depth.systems.<system>.epochs``) the ``val`` scenes' images and LiDAR depth. ``mode`` without the seed
+    part."""
     mode_cfg = config["depth"]["modes"][mode]
-    scenes = split_of(scenes, "train")
+    all_scenes, scenes = scenes, split_of(scenes, "train")
     files = {"scenes": [f"results/raw/{dataset}/{s}" for s in scenes]}
     for cam in mode_cfg["cameras"]:
         files[cam] = [f"results/prepared/{dataset}/{s}/{cam}.npz" for s in scenes]
     if "stereo" in mode_cfg["sources"]:
         files["stereo"] = [f"results/prepared/{dataset}/{s}/cam_front_right.npz" for s in scenes]
+    system = config["depth"]["modes"][mode].get("system", "monodepth2")
+    epochs = config["depth"].get("systems", {}).get(system, {}).get("epochs", 0) if system != "monodepth2" else 0
+    val = split_of(all_scenes, "val")
+    if epochs and val:  # validation passes (best epoch on val): the val scenes' images and LiDAR depth
+        cam = config["depth"]["eval"]["camera"]
+        files["val_scenes"] = [f"results/raw/{dataset}/{s}" for s in val]
+        files["val_images"] = [f"results/prepared/{dataset}/{s}/{cam}.npz" for s in val]
+        files["val_gt"] = [f"results/prepared/{dataset}/{s}/{cam}_depth.npz" for s in val]
     return files
 
 

@@ -216,3 +216,26 @@ def eval_sample(seq: Sequence, t: int, sources: Seq[str]) -> dict | str:
     if isinstance(idx, str):
         return idx
     return make_batch([seq], [(0, t)], sources)
+
+
+def resize_sequence(seq: Sequence, size: tuple[int, int]) -> Sequence:
+    """The sequence at another input size (H, W): images (and the stereo partner) area-resampled, K rescaled with
+    pixel (0, 0) at the centre of the top-left pixel (u' = (u + 0.5) s - 0.5). The same sequence if the size
+    already matches. Systems that train at a reduced resolution see their data through this, at training and
+    at test time (the prediction is resized to the ground truth by the evaluation)."""
+    h, w = int(size[0]), int(size[1])
+    if seq.size == (h, w):
+        return seq
+
+    def images(a: np.ndarray) -> np.ndarray:
+        x = torch.nn.functional.interpolate(to_tensor(a), size=(h, w), mode="area")
+        return (x.movedim(-3, -1) * 255.0).round().clamp(0, 255).to(torch.uint8).numpy()
+
+    sy, sx = h / seq.size[0], w / seq.size[1]
+    K = np.array(seq.K, dtype=np.float64, copy=True)
+    K[0] *= sx
+    K[1] *= sy
+    K[0, 2] += 0.5 * sx - 0.5
+    K[1, 2] += 0.5 * sy - 0.5
+    return Sequence(seq.name, images(seq.images), K, None if seq.stereo is None else images(seq.stereo),
+                    seq.stereo_T, seq.speed, seq.reversed, seq.camera, dict(seq.extra))

@@ -18,7 +18,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from redsup.depth import adaptation, data, evaluation, networks, pipeline
+from redsup.depth import adaptation, data, evaluation, networks, pipeline, systems
 from redsup.depth.configs import EvalSpec
 
 def select_frames(n_frames: int, spec: Mapping) -> list[int]:
@@ -57,22 +57,54 @@ class EvalSequence:
     gt: np.ndarray  # (T, h, w)
 
 
-def _predict(models, image: torch.Tensor, meta: Mapping) -> np.ndarray:
-    with torch.no_grad():
-        d = pipeline.predict_depth(models, image, meta["min_depth"], meta["max_depth"])
+def _predict(models, batch: Mapping, meta: Mapping, branch: str = "") -> np.ndarray:
+    """Depth (H, W) of the batch-of-one ``batch`` (``target``; ``prev`` / ``K`` for multi-frame systems)."""
+    prev = batch.get("prev", batch.get("sources", {}).get("prev"))
+    d = systems.predict_depth(models, meta, batch["target"], prev, batch.get("K"), branch)
     return d[0, 0].detach().cpu().numpy()
 
 
+predict_frame = _predict  # public name: depth (H, W) of one prediction batch
+
+
+def prediction_batch(seq: data.Sequence, t: int, meta: Mapping, branch: str = "") -> dict:
+    """The test input of frame t without adaptation: the target, K and, for a multi-frame system, the previous
+    frame (none at the start of a sequence: the system's fallback)."""
+    batch = {"target": data.to_tensor(seq.images[t:t + 1]), "K": torch.tensor(seq.K[None], dtype=torch.float32)}
+    j = data.source_index(seq, t, "prev")
+    if systems.needs_previous(meta, branch) and 0 <= j < seq.n_frames:
+        batch["prev"] = data.to_tensor(seq.images[j:j + 1])
+    return batch
+
+
 def predict_sequence(models, images: np.ndarray, meta: Mapping, batch_size: int = 8,
-                     device: str | torch.device = "cpu") -> np.ndarray:
-    """Raw network depth (T, H, W) float32 of every frame (no scaling)."""
+                     device: str | torch.device = "cpu", K: np.ndarray | None = None) -> np.ndarray:
+    """Raw network depth (T, H, W) float32 of every frame (no scaling); a multi-frame system reads frame t - 1
+    too (``K`` needed), its first frame has none."""
     out = []
     for m in models.values():
         m.eval()
+    multi = systems.needs_previous(meta)
+    if multi and K is None:
+        raise ValueError("a multi-frame depth system needs the intrinsics K")
+    Kt = None if K is None else torch.tensor(np.asarray(K)[None], dtype=torch.float32).to(device)
     with torch.no_grad():
         for start in range(0, len(images), batch_size):
             x = data.to_tensor(images[start:start + batch_size]).to(device)
-            out.append(pipeline.predict_depth(models, x, meta["min_depth"], meta["max_depth"])[:, 0].cpu().numpy())
+            if multi:
+                prev = data.to_tensor(images[max(start - 1, 0):start + len(x) - 1]).to(device)
+                first = start == 0
+                parts = []
+                if first:
+                    parts.append(systems.predict_depth(models, meta, x[:1], None, Kt))
+                if len(x) > int(first):
+                    rest = x[int(first):]
+                    parts.append(systems.predict_depth(models, meta, rest, prev[-len(rest):],
+                                                       Kt.expand(len(rest), -1, -1)))
+                d = torch.cat(parts)
+            else:
+                d = systems.predict_depth(models, meta, x)
+            out.append(d[:, 0].cpu().numpy())
     return np.concatenate(out).astype(np.float32) if out else np.zeros((0,) + images.shape[1:3], np.float32)
 
 
@@ -96,7 +128,8 @@ def _loss_fn(loss_kwargs: Mapping, seed: int) -> Callable:
 def run_instance(models: Mapping[str, nn.Module], meta: Mapping, seqs: Seq[EvalSequence],
                  frames: Seq[tuple[int, int]], *, sources: Seq[str], groups: Seq[str], lr: float,
                  checkpoints: Seq[int], eval_cfg: Mapping, loss_kwargs: Mapping, metric_scale: bool | float,
-                 progress: Callable[[int, int], None] | None = None) -> tuple[list[dict], list[float]]:
+                 progress: Callable[[int, int], None] | None = None, branch: str = ""
+                 ) -> tuple[list[dict], list[float]]:
     """Instance-wise adaptation: for every (sequence, frame) reset to the trained weights, take
     max(checkpoints) SGD steps on the frame's test sample and evaluate the prediction at every checkpoint.
     ``seconds`` of a checkpoint = adaptation time so far + the prediction. Without ``sources`` (prediction
@@ -116,13 +149,13 @@ def run_instance(models: Mapping[str, nn.Module], meta: Mapping, seqs: Seq[EvalS
                     records += [_record(es, t, k, None, None, batch) for k in checkpoints]
                     continue
             else:
-                batch = {"target": data.to_tensor(es.seq.images[t:t + 1])}
+                batch = prediction_batch(es.seq, t, meta, branch)
             adaptation.load_snapshot(models, state)
 
             def on_step(step, loss, elapsed, es=es, t=t, batch=batch):
                 if step in checkpoints:
                     start = time.perf_counter()
-                    pred = _predict(models, batch["target"], meta)
+                    pred = _predict(models, batch, meta, branch)
                     secs = elapsed + time.perf_counter() - start
                     records.append(_record(es, t, step, evaluate_depth(es.gt[t], pred, eval_cfg, metric_scale), secs))
 
@@ -167,7 +200,7 @@ def run_sequential(models: Mapping[str, nn.Module], meta: Mapping, seqs: Seq[Eva
                     continue
                 start = time.perf_counter()
                 hist = adaptation.adapt(models, _loss_fn(loss_kwargs, 1000 * i + t), batch, params, lr, steps)
-                pred = _predict(models, batch["target"], meta)
+                pred = _predict(models, batch, meta)
                 secs = time.perf_counter() - start
                 losses += hist
                 records.append(_record(es, t, steps, evaluate_depth(es.gt[t], pred, eval_cfg, metric_scale), secs))
@@ -211,6 +244,32 @@ def run_direct(models: Mapping[str, nn.Module], meta: Mapping, seqs: Seq[EvalSeq
     return records, (loss_sum / max(loss_n, 1)).tolist()
 
 
+def validation_metrics(models, meta: Mapping, seqs: Seq[EvalSequence], eval_cfg: Mapping, frames_cfg: Mapping,
+                       branch: str = "") -> dict[str, float]:
+    """Per-image means of the seven metrics (and ``n_frames``) of the trained networks' prediction on the
+    validation frames (no adaptation): what a training job's validation pass logs and selects on."""
+    metric_scale = float(meta.get("stereo_scale_factor", 1.0)) if "stereo" in meta.get("sources", ()) else False
+    records, _ = run_instance(models, meta, seqs, plan_frames(seqs, frames_cfg), sources=(), groups=(), lr=0.0,
+                              checkpoints=(0,), eval_cfg=eval_cfg, loss_kwargs={}, metric_scale=metric_scale,
+                              branch=branch)
+    agg = summarise(records)[0]
+    return {k: float(v) for k, v in agg.items() if isinstance(v, (int, float))}
+
+
+def timing_context(threads: int, size: tuple[int, int], device: str = "cpu") -> dict:
+    """Where the per-frame seconds were measured: the device in words, torch threads and the input size."""
+    name = "CPU"
+    if str(device).startswith("cuda") and torch.cuda.is_available():
+        name = torch.cuda.get_device_name()
+    else:
+        try:
+            with open("/proc/cpuinfo") as f:
+                name = next((ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name")), "CPU")
+        except OSError:
+            pass
+    return {"device": name, "threads": int(threads), "height": int(size[0]), "width": int(size[1])}
+
+
 def plan_frames(seqs: Seq[EvalSequence], frames_cfg: Mapping) -> list[tuple[int, int]]:
     """(sequence index, frame) pairs selected by a ``depth.eval.frames`` entry."""
     return [(i, t) for i, es in enumerate(seqs) for t in select_frames(es.seq.n_frames, frames_cfg)]
@@ -227,7 +286,8 @@ def run_spec(spec: EvalSpec, models, meta: Mapping, seqs: Seq[EvalSequence], dep
         frames = plan_frames(seqs, eval_cfg["frames"][spec.frames])
         records, curve = run_instance(models, meta, seqs, frames, sources=spec.sources, groups=spec.groups,
                                       lr=spec.lr, checkpoints=spec.checkpoints, eval_cfg=eval_cfg,
-                                      loss_kwargs=loss_kwargs, metric_scale=metric_scale, progress=progress)
+                                      loss_kwargs=loss_kwargs, metric_scale=metric_scale, progress=progress,
+                                      branch=spec.branch)
     elif spec.kind == "sequential":
         records, curve = run_sequential(models, meta, seqs, sources=spec.sources, groups=spec.groups, lr=spec.lr,
                                         steps=spec.steps, eval_cfg=eval_cfg, loss_kwargs=loss_kwargs,

@@ -140,18 +140,19 @@ def feature_metric_loss(target_feat: torch.Tensor, source_feats: Mapping[str, to
 class FeatDepthLoss:
     """The Feature Depth criterion ``(models, batch, step) -> loss dict`` for ``training.train``.
 
-    ``loss_kwargs`` go to ``losses.self_supervised_loss``; temporal sources only (the feature-metric term warps
+    ``dis_weight`` / ``cvt_weight``: the thesis' alpha / beta (eq. 3.20; ``alpha`` of ``loss_kwargs`` is the
+    SSIM weight of the photometric error). ``loss_kwargs`` go to ``losses.self_supervised_loss``; temporal sources only (the feature-metric term warps
     the FeatureNet features of every source)."""
 
-    def __init__(self, *, min_depth: float = 0.1, max_depth: float = 100.0, alpha: float = 1e-3, beta: float = 1e-3,
-                 feature_weight: float = 1.0, **loss_kwargs):
+    def __init__(self, *, min_depth: float = 0.1, max_depth: float = 100.0, dis_weight: float = 1e-3,
+                 cvt_weight: float = 1e-3, feature_weight: float = 1.0, **loss_kwargs):
         self.min_depth, self.max_depth = float(min_depth), float(max_depth)
-        self.alpha, self.beta, self.feature_weight = float(alpha), float(beta), float(feature_weight)
+        self.dis_weight, self.cvt_weight, self.feature_weight = float(dis_weight), float(cvt_weight), float(feature_weight)
         self.loss_kwargs = loss_kwargs
 
     def __call__(self, models: Mapping[str, nn.Module], batch: Mapping, step: int = 1) -> dict[str, torch.Tensor]:
         target = batch["target"]
-        fnet = featurenet_loss(models, target, self.alpha, self.beta)
+        fnet = featurenet_loss(models, target, self.dis_weight, self.cvt_weight)
         disps = pipeline.predict_disparities(models, target)
         transforms = pipeline.source_transforms(models, batch)
         photo = pipeline.loss_from_outputs(batch, disps, transforms, min_depth=self.min_depth,

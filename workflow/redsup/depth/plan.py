@@ -28,12 +28,12 @@ from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 
 from redsup.depth.configs import (METRIC_COLUMNS, EvalSpec, Row, eval_inputs, groups_label, lr_label,
-                                  mode_sources, n_seeds, parse_model, plan as plan_runs, seed_models,
+                                  mode_sources, n_seeds, parse_model, plan as plan_runs, seed_models, system_of,
                                   trained_models)
 
 STAGES = ("depth", "galteland")
 ROW_FIELDS = ("kind", "dataset", "mode", "test", "split", "frames", "sources", "groups", "lr", "steps", "step",
-              "group", "label", "each")
+              "group", "label", "branch", "each")
 
 
 def _tables_of_stage(registry=None) -> list[str]:
@@ -102,7 +102,7 @@ def expand_rows(table_id: str, depth_cfg: Mapping) -> list[Row]:
             steps = int(v.get("steps", 0)) if kind != "instance" else 0
             step = int(v.get("step", steps))
             spec = EvalSpec(kind, f"{dataset}/{mode}", f"{test}/{v.get('split', 'test')}", v.get("frames", "short"),
-                            sources, groups, lr, steps)
+                            sources, groups, lr, steps, branch=str(v.get("branch", "")))
             values = {**v, "kind": kind, "dataset": dataset, "mode": mode, "test": test, "groups": groups,
                       "lr": lr, "steps": steps, "step": step}
             label = _fill(v["label"], values, fmt) if "label" in v else groups_label(groups)
@@ -115,7 +115,7 @@ def _available(config: Mapping, scenes_of: Callable[[str], list[str]]) -> tuple[
     available, cameras = {}, {}
     for name, spec in config["datasets"].items():
         scenes = scenes_of(name)
-        available[name] = {s: sum(x.startswith(f"{s}_") for x in scenes) for s in ("train", "test", "long")}
+        available[name] = {s: sum(x.startswith(f"{s}_") for x in scenes) for s in ("train", "val", "test", "long")}
         if spec["kind"] == "world":
             rendered = config["world"]["domains"][spec["domain"]]["cameras"]
         else:
@@ -253,11 +253,14 @@ def table_frame(table_id: str, config: Mapping, rows: Sequence[tuple], results: 
         df, noise, info = reporting.table_frame([by_label[label] for label, _ in seed_rows],
                                                 [results[run] for _, run in seed_rows],
                                                 time_column=tcfg.get("time_column"),
-                                                with_last_quarter=bool(tcfg.get("last_quarter", False)))
+                                                with_last_quarter=bool(tcfg.get("last_quarter", False)),
+                                                fps_column=tcfg.get("fps_column"))
         frames.append((df, noise))
         infos.append(info)
+    models = [by_label[label].spec.model for label, _, _ in rows]
+    timing = next((results[run]["timing"] for _, run, _ in rows if results[run].get("timing")), None)
     if not frames:
-        return TableFrame(reporting.table_frame([], [])[0], {}, table_note(config, tcfg, {}, 1))
+        return TableFrame(reporting.table_frame([], [])[0], {}, table_note(config, tcfg, {}, 1, models, timing))
     ours, noise = frames[0][0].copy(), dict(frames[0][1])
     for label, n in seen.items():
         if n < 2:
@@ -266,19 +269,44 @@ def table_frame(table_id: str, config: Mapping, rows: Sequence[tuple], results: 
         for c, vals in values.items():
             ours.at[label, c] = float(np.mean(vals))
         noise[label] = {col: noise_lib.seeds(values[col]) for col in METRIC_COLUMNS.values() if col in values}
-    return TableFrame(ours, noise, table_note(config, tcfg, infos[0], max(seen.values())))
+    return TableFrame(ours, noise, table_note(config, tcfg, infos[0], max(seen.values()), models, timing))
 
 
-def table_note(config: Mapping, table_cfg: Mapping, info: Mapping, seeds: int = 1) -> str:
-    """Caption note: the training recipe, the table's own note, the frames per comparison group, skips."""
+SYSTEM_NAMES = {"manydepth": "Manydepth", "featdepth": "Feature Depth"}
+
+
+def _system_recipe(config: Mapping, system: str) -> str:
     d = config["depth"]
+    s = d.get("systems", {}).get(system, {})
+    width = s.get("base_channels", d["model"]["base_channels"])
+    steps, batch = s.get("steps", d["train"]["steps"]), s.get("batch_size", d["train"]["batch_size"])
+    epochs = int(s.get("epochs", 0))
+    extra = f", {s['n_bins']} cost-volume bins" if "n_bins" in s else ""
+    val = (f", {epochs} validation passes on the val split, the weights of the pass with the lowest val Abs Rel "
+           "kept (never chosen on test)") if epochs else ""
+    return (f"{SYSTEM_NAMES.get(system, system)}: ResNet-18 width {width}, input {s.get('input_scale', 1.0):g} x the "
+            f"prepared size{extra}, {steps} steps of batch {batch}{val}")
+
+
+def table_note(config: Mapping, table_cfg: Mapping, info: Mapping, seeds: int = 1, models: Sequence[str] = (),
+               timing: Mapping | None = None) -> str:
+    """Caption note: the training recipe of each system in the rows, the table's own note, the device of the
+    FPS column, the frames per comparison group, skips."""
+    d = config["depth"]
+    used = list(dict.fromkeys(system_of(d, parse_model(m)[1]) for m in models)) or ["monodepth2"]
     overrides = sorted({int(m["steps"]) for m in d["models"] if "steps" in m})
     steps = f"{d['train']['steps']} steps"
     if overrides:
         steps += f" ({'/'.join(map(str, overrides))} for some models)"
+    recipes = [_system_recipe(config, s) for s in used if s != "monodepth2"]
+    if "monodepth2" in used:
+        recipes.insert(0, f"ResNet-18 width {d['model']['base_channels']}, {steps} of batch {d['train']['batch_size']}, "
+                          f"flips {'on' if d['train']['flip'] else 'off'}")
     parts = [f"Profile {config.get('profile')}: embedded world, networks trained from scratch "
-             f"(ResNet-18 width {d['model']['base_channels']}, {steps} of batch {d['train']['batch_size']}, "
-             f"flips {'on' if d['train']['flip'] else 'off'}), no ImageNet weights"]
+             f"({'; '.join(recipes)}), no ImageNet weights"]
+    if table_cfg.get("fps_column") and timing:
+        parts.append(f"{table_cfg['fps_column']}: one frame per forward pass at {timing['height']}x{timing['width']} on "
+                     f"{timing['device']} ({timing['threads']} torch thread(s)); the thesis measured on an NVIDIA T4")
     if table_cfg.get("note"):
         parts.append(str(table_cfg["note"]).rstrip("."))
     groups = info.get("groups", {})
@@ -298,3 +326,30 @@ def table_note(config: Mapping, table_cfg: Mapping, info: Mapping, seeds: int = 
 
 __all__ = ["METRIC_COLUMNS", "expand_rows", "table_rows", "with_seeds", "runs", "rows", "result_path",
            "table_frame", "model_parent", "model_tables", "models", "eval_files", "spec_of"]
+
+
+# ------------------------------------------------------------------------------- Galteland's figures
+def figures(config: Mapping, scenes_of) -> list[str]:
+    """Ids of ``depth.figures`` that can be drawn: every model trained, a test scene for qualitative ones."""
+    from redsup.depth.galteland_figures import available_figures
+
+    specs = config["depth"].get("figures", {})
+    if not specs:
+        return []
+    trained = {m for m in models(config, scenes_of) if parse_model(m)[2] == 0}
+    available, _ = _available(config, scenes_of)
+    return available_figures(specs, sorted(trained), {d: s["test"] for d, s in available.items()})
+
+
+def figure_files(config: Mapping, figure: str, scenes_of) -> dict:
+    """Inputs of ``galteland_figure``: the checkpoints (seed 0) and, qualitative, the first test scene's images."""
+    from redsup.depth.galteland_figures import figure_models
+
+    spec = config["depth"]["figures"][figure]
+    files: dict = {"models": [f"results/depth/models/{m}.pt" for m in figure_models(spec)]}
+    if spec["kind"] == "qualitative":
+        from redsup.depth.configs import split_of
+
+        scene = split_of(scenes_of(spec["test"]), "test")[0]
+        files["images"] = f"results/prepared/{spec['test']}/{scene}/{config['depth']['eval']['camera']}.npz"
+    return files

@@ -29,11 +29,11 @@ def common_frames(rows: Seq[Row], results: Seq[Mapping]) -> set[tuple[str, int]]
 
 
 def table_frame(rows: Seq[Row], results: Seq[Mapping], time_column: str | None = None,
-                with_last_quarter: bool = False) -> tuple[pd.DataFrame, dict, dict]:
+                with_last_quarter: bool = False, fps_column: str | None = None) -> tuple[pd.DataFrame, dict, dict]:
     """(ours, noise, info) for ``write_table``: one line per row with the seven metrics, ``time_column`` (mean
     seconds per frame) when given, ``Abs Rel (last quarter)`` when ``with_last_quarter``, ``frames`` (averaged: the
     group's common frames) and ``skipped`` (frames this row could not evaluate: missing neighbour, no valid
-    ground truth, ...). ``noise``: a bootstrap record per metric cell over the group's common frames (the
+    ground truth, ...); ``fps_column``: 1 / mean seconds per frame. ``noise``: a bootstrap record per metric cell over the group's common frames (the
     same units for every row of a group: a paired bootstrap). info holds the skip reasons and the frame
     counts per group."""
     from redsup.tables import noise as noise_lib
@@ -63,6 +63,8 @@ def table_frame(rows: Seq[Row], results: Seq[Mapping], time_column: str | None =
         secs = [r["seconds"] for r in kept if r.get("seconds") is not None]
         if time_column:
             line[time_column] = float(np.mean(secs)) if secs else np.nan
+        if fps_column:  # frames per second of the prediction (batch of one), where the run measured it
+            line[fps_column] = 1.0 / float(np.mean(secs)) if secs and np.mean(secs) > 0 else np.nan
         line["frames"] = len(kept)
         line["skipped"] = sum("reason" in r for r in recs)
         reasons = sorted({r["reason"] for r in recs if "reason" in r})

@@ -30,11 +30,21 @@ def batches(n_samples: int, batch_size: int, steps: int, rng: np.random.Generato
 
 
 def train(models: Mapping[str, nn.Module], seqs: Seq[data.Sequence], sources: Seq[str], *, steps: int,
-          batch_size: int, lr: float, decay_at: float = 0.75, gamma: float = 0.1, flip: bool = True,
+          batch_size: int, lr: float, decay_at: float | Seq[float] = 0.75, gamma: float = 0.1, flip: bool = True,
           min_speed: float = 0.0, seed: int = 0, loss_kwargs: Mapping | None = None,
-          callback: Callable[[int, dict], None] | None = None, device: str | torch.device = "cpu") -> dict:
+          callback: Callable[[int, dict], None] | None = None, device: str | torch.device = "cpu",
+          criterion: Callable[..., Mapping[str, torch.Tensor]] | None = None,
+          validate: Callable[[int], Mapping[str, float]] | None = None, validate_every: int = 0,
+          select: str = "abs_rel") -> dict:
     """Train ``models`` in place; ``callback(step, terms)`` after every step (terms: floats of the loss dict
-    plus ``lr``). Returns a summary (samples, dropped frames, steps, seconds, images per second, last loss)."""
+    plus ``lr``). Returns a summary (samples, dropped frames, steps, seconds, images per second, last loss).
+
+    ``criterion(models, batch, step)`` -> loss dict (``loss`` minimised) is the system's training loss (default:
+    Monodepth2's ``pipeline.batch_loss`` with ``loss_kwargs``). ``decay_at``: one fraction of the steps or a list
+    (lr x gamma at each). ``validate(step)`` -> metrics on the validation split, called every ``validate_every``
+    steps and after the last (an "epoch"); the weights of the pass with the lowest ``select`` are restored at the
+    end (best-epoch selection on validation) and the summary holds every pass (``validation``: step, the
+    metrics, the mean of each loss term over the epoch) and ``best_step``."""
     loss_kwargs = dict(loss_kwargs or {})
     samples, dropped = data.training_samples(seqs, sources, min_speed)
     static_fallback = False
@@ -50,34 +60,77 @@ def train(models: Mapping[str, nn.Module], seqs: Seq[data.Sequence], sources: Se
     generator = torch.Generator().manual_seed(seed)
     params = [p for m in models.values() for p in m.parameters()]
     optimizer = torch.optim.Adam(params, lr=lr)
-    decay_step = int(round(decay_at * steps))
+    fractions = [decay_at] if isinstance(decay_at, (int, float)) else list(decay_at)
+    decay_steps = {int(round(f * steps)) for f in fractions} - {0}
     for m in models.values():
         m.train()
     start = time.perf_counter()
     last: dict = {}
+    history: list[dict] = []
+    epoch_terms: dict[str, list[float]] = {}
+    best: tuple[float, int, dict] | None = None
+    val_seconds = 0.0
     for step, idx in enumerate(tqdm(batches(len(samples), batch_size, steps, rng), total=steps, desc="train depth",
                                     unit="step", mininterval=5), start=1):
-        if step == decay_step + 1 and decay_step > 0:
+        if step - 1 in decay_steps:
             for group in optimizer.param_groups:
-                group["lr"] = lr * gamma
+                group["lr"] = group["lr"] * gamma
         items = [samples[i] for i in idx]
         flips = (rng.random(len(items)) < 0.5).tolist() if flip else None
         batch = _to(data.make_batch(seqs, items, sources, flips), device)
-        terms = pipeline.train_step(models, optimizer, batch, generator=generator if device == "cpu" else None,
-                                    **loss_kwargs)
+        if criterion is None:
+            terms = pipeline.train_step(models, optimizer, batch, generator=generator if device == "cpu" else None,
+                                        **loss_kwargs)
+        else:
+            terms = criterion_step(criterion, models, optimizer, batch, step)
         if not np.isfinite(terms["loss"]):
             raise FloatingPointError(f"training loss became {terms['loss']} at step {step}")
         terms["lr"] = optimizer.param_groups[0]["lr"]
         last = terms
+        for k, v in terms.items():
+            epoch_terms.setdefault(k, []).append(v)
         if callback is not None:
             callback(step, terms)
-    seconds = time.perf_counter() - start
+        if validate is not None and ((validate_every > 0 and step % validate_every == 0) or step == steps):
+            t0 = time.perf_counter()
+            for m in models.values():
+                m.eval()
+            metrics = {k: float(v) for k, v in validate(step).items()}
+            for m in models.values():
+                m.train()
+            val_seconds += time.perf_counter() - t0
+            history.append({"step": step, **metrics,
+                            **{f"train_{k}": float(np.mean(v)) for k, v in epoch_terms.items()}})
+            epoch_terms = {}
+            score = metrics.get(select, float("nan"))
+            if np.isfinite(score) and (best is None or score < best[0]):
+                best = (score, step, {n: {k: v.detach().clone() for k, v in m.state_dict().items()}
+                                      for n, m in models.items()})
+    seconds = time.perf_counter() - start - val_seconds
+    if best is not None:
+        for n, m in models.items():
+            m.load_state_dict(best[2][n])
     for m in models.values():
         m.eval()
-    return {"samples": len(samples), "dropped_missing_source": dropped["missing_source"],
-            "dropped_static": dropped["static"], "steps": steps, "batch_size": batch_size,
-            "train_seconds": seconds, "images_per_second": steps * batch_size / max(seconds, 1e-9),
-            "final_loss": float(last.get("loss", float("nan"))), "static_fallback": int(static_fallback)}
+    summary = {"samples": len(samples), "dropped_missing_source": dropped["missing_source"],
+               "dropped_static": dropped["static"], "steps": steps, "batch_size": batch_size,
+               "train_seconds": seconds, "images_per_second": steps * batch_size / max(seconds, 1e-9),
+               "final_loss": float(last.get("loss", float("nan"))), "static_fallback": int(static_fallback)}
+    if validate is not None:
+        summary.update(validation=history, validation_seconds=val_seconds,
+                       best_step=best[1] if best is not None else steps,
+                       **({f"best_val_{select}": best[0]} if best is not None else {}))
+    return summary
+
+
+def criterion_step(criterion: Callable[..., Mapping[str, torch.Tensor]], models: Mapping[str, nn.Module],
+                   optimizer: torch.optim.Optimizer, batch: Mapping, step: int) -> dict[str, float]:
+    """One optimiser step on ``criterion(models, batch, step)["loss"]``; returns float terms."""
+    optimizer.zero_grad(set_to_none=True)
+    terms = criterion(models, batch, step)
+    terms["loss"].backward()
+    optimizer.step()
+    return {k: float(v.detach()) if torch.is_tensor(v) else float(v) for k, v in terms.items()}
 
 
 def _to(batch: dict, device) -> dict:

@@ -24,7 +24,7 @@ from .lidar import sweep
 from .sensors import make_rig
 from .shade import SceneView, render_camera
 
-SPLITS = ("train", "test", "long")
+SPLITS = ("train", "val", "test", "long")
 PNG = [cv2.IMWRITE_PNG_COMPRESSION, 1]
 
 
@@ -66,7 +66,7 @@ def write_scene(world_cfg: dict, dataset: str, domain: str, split: str, index: i
     dom = world_cfg["domains"][domain]
     n_frames = int(world_cfg["frames"][split])
     fps = float(world_cfg["fps"])
-    world = build_world(world_cfg, dom, derive_rng(seed, "scene", domain, SPLIT_CODES[split], index), n_frames)
+    world = build_world(world_cfg, dom, derive_rng(seed, "scene", domain, SPLIT_CODES.get(split, split), index), n_frames)
     cams, lidar = make_rig(dom, world_cfg["rig"], world_cfg["lidar"])
     view = SceneView(world.road, world.style, world.cars, world.buildings)
     out_dir = Path(out_dir)
@@ -83,7 +83,7 @@ def write_scene(world_cfg: dict, dataset: str, domain: str, split: str, index: i
                 (tmp / f"{sub}{cam.name}").mkdir(parents=True)
         (tmp / lidar.name).mkdir()
         stats = _render_frames(world, world_cfg, dom, cams, lidar, view, n_frames, tmp,
-                               derive_rng(seed, "frames", domain, SPLIT_CODES[split], index))
+                               derive_rng(seed, "frames", domain, SPLIT_CODES.get(split, split), index))
         poses = world.ego.poses[:, :3, :].reshape(n_frames, 12)
         np.savetxt(tmp / "ego_poses.txt", poses, fmt="%.9f")
         publish(tmp, out_dir)

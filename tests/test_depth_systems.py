@@ -1,0 +1,129 @@
+"""The depth systems as components: the trainer takes a criterion, validation passes select the best epoch,
+checkpoints rebuild each system, reduced input sizes and the FPS column."""
+import numpy as np
+import pytest
+import torch
+
+from redsup.depth import checkpoint, data, experiments, featdepth, manydepth, networks, reporting, systems, training
+from redsup.depth.configs import EvalSpec, Row
+
+torch.set_num_threads(1)
+
+
+def _seq(n=6, h=32, w=48, seed=0):
+    rng = np.random.default_rng(seed)
+    base = rng.integers(0, 255, size=(h, w + 2 * n, 3), dtype=np.uint8)
+    images = np.stack([base[:, i:i + w] for i in range(n)])
+    K = np.array([[30.0, 0.0, (w - 1) / 2], [0.0, 30.0, (h - 1) / 2], [0.0, 0.0, 1.0]])
+    return data.Sequence("train_000", images, K)
+
+
+def test_resize_sequence_pixel_centre_intrinsics_and_area_images():
+    seq = _seq(2, 32, 48)
+    small = data.resize_sequence(seq, (16, 24))
+    assert small.images.shape == (2, 16, 24, 3) and small.images.dtype == np.uint8
+    # u' = (u + 0.5) / 2 - 0.5: cx 23.5 -> 11.5, f 30 -> 15
+    assert small.K[0, 0] == pytest.approx(15.0) and small.K[0, 2] == pytest.approx(11.5)
+    assert small.K[1, 2] == pytest.approx(7.5)
+    block = seq.images[0, :2, :2].astype(float).mean(axis=(0, 1))
+    assert np.allclose(small.images[0, 0, 0], np.round(block), atol=1)
+    assert data.resize_sequence(seq, (32, 48)) is seq
+
+
+def test_trainer_takes_the_criterion_and_keeps_the_best_validation_pass():
+    torch.manual_seed(0)
+    models = manydepth.build_models(base_channels=4, n_bins=4)
+    crit = manydepth.ManydepthLoss(generator=torch.Generator().manual_seed(0), noise_std=0.0)
+    scores = {2: 0.5, 4: 0.3, 6: 0.4}  # the second pass is the best
+    states = {}
+
+    def validate(step):
+        states[step] = {k: v.clone() for k, v in models["depth_decoder"].state_dict().items()}
+        return {"abs_rel": scores[step], "rmse": 1.0}
+
+    calls = []
+    summary = training.train(models, [_seq()], ["prev", "next"], steps=6, batch_size=2, lr=1e-3, seed=0,
+                             criterion=lambda m, b, step: (calls.append(step), crit(m, b, step))[1],
+                             validate=validate, validate_every=2)
+    assert calls == [1, 2, 3, 4, 5, 6]  # the criterion sees the step (Manydepth's freeze)
+    assert summary["best_step"] == 4 and summary["best_val_abs_rel"] == pytest.approx(0.3)
+    assert [h["step"] for h in summary["validation"]] == [2, 4, 6]
+    assert all("train_loss" in h and "train_consistency" in h for h in summary["validation"])
+    restored = models["depth_decoder"].state_dict()
+    assert all(torch.equal(restored[k], states[4][k]) for k in restored)
+    assert not all(torch.equal(restored[k], states[6][k]) for k in restored)
+
+
+def test_decay_at_several_fractions():
+    torch.manual_seed(0)
+    lrs = []
+    training.train(featdepth.build_models(base_channels=4), [_seq()], ["prev", "next"], steps=4, batch_size=2,
+                   lr=1e-3, decay_at=[0.25, 0.5], gamma=0.5, seed=0,
+                   criterion=featdepth.FeatDepthLoss(noise_std=0.0), callback=lambda s, t: lrs.append(t["lr"]))
+    assert lrs == pytest.approx([1e-3, 5e-4, 2.5e-4, 2.5e-4])
+
+
+@pytest.mark.parametrize("system", ["manydepth", "featdepth", "monodepth2"])
+def test_checkpoint_rebuilds_each_system(tmp_path, system):
+    meta = {"system": system, "base_channels": 4, "num_scales": 4, "height": 32, "width": 48, "min_depth": 0.1,
+            "max_depth": 100.0, "mode": "X", "n_bins": 4}
+    torch.manual_seed(0)
+    models = systems.build(meta)
+    if system == "manydepth":
+        models["depth_range"].update(torch.full((1, 1, 4, 4), 3.0))
+    checkpoint.save(tmp_path / "m.pt", models, meta)
+    loaded, meta2 = checkpoint.load(tmp_path / "m.pt")
+    assert set(loaded) == set(models)
+    seq = _seq(3)
+    batch = experiments.prediction_batch(seq, 1, meta2)
+    assert ("prev" in batch) == (system == "manydepth")
+    d = experiments.predict_frame(loaded, batch, meta2)
+    ref = systems.predict_depth(models.eval(), meta, batch["target"], batch.get("prev"), batch["K"])
+    assert d.shape == (32, 48) and np.allclose(d, ref[0, 0].numpy(), rtol=1e-5)
+    if system == "manydepth":
+        assert loaded["depth_range"].d_min.item() == pytest.approx(models["depth_range"].d_min.item())
+        teacher = experiments.predict_frame(loaded, experiments.prediction_batch(seq, 1, meta2, "teacher"), meta2,
+                                            "teacher")
+        assert not np.allclose(teacher, d)
+    else:
+        with pytest.raises(ValueError, match="branch"):
+            systems.predict_depth(loaded, meta2, batch["target"], branch="teacher")
+
+
+def test_multi_frame_predict_sequence_uses_the_previous_frame():
+    torch.manual_seed(0)
+    meta = {"system": "manydepth", "min_depth": 0.1, "max_depth": 100.0}
+    models = manydepth.build_models(base_channels=4, n_bins=4).eval()
+    seq = _seq(4)
+    out = experiments.predict_sequence(models, seq.images, meta, batch_size=3, K=seq.K)
+    for t in range(4):
+        ref = experiments.predict_frame(models, experiments.prediction_batch(seq, t, meta), meta)
+        assert np.allclose(out[t], ref, rtol=1e-4)
+    with pytest.raises(ValueError, match="intrinsics"):
+        experiments.predict_sequence(models, seq.images, meta)
+
+
+def test_fps_column_is_one_over_the_mean_seconds():
+    rec = [{"sequence": "s", "frame": f, "step": 0, "seconds": s, "metrics": {"abs_rel": 0.1, "sq_rel": 0.1,
+            "rmse": 1.0, "rmse_log": 0.1, "a1": 0.9, "a2": 0.95, "a3": 0.99}} for f, s in enumerate([0.02, 0.03])]
+    row = Row("Manydepth", EvalSpec("instance", "d/MD", "d/test", "all"))
+    df, _, _ = reporting.table_frame([row], [{"records": rec}], fps_column="FPS")
+    assert df.at["Manydepth", "FPS"] == pytest.approx(40.0)
+
+
+def test_train_settings_override_per_system():
+    cfg = {"model": {"base_channels": 16, "num_scales": 4, "min_depth": 0.1, "max_depth": 100.0,
+                     "init_disparity": None},
+           "train": {"steps": 600, "batch_size": 4, "lr": 1e-4, "decay_at": 0.75, "gamma": 0.1},
+           "modes": {"MD": {"sources": ["prev", "next"], "cameras": ["cam_front"], "system": "manydepth"},
+                     "M": {"sources": ["prev", "next"], "cameras": ["cam_front"]}},
+           "systems": {"manydepth": {"base_channels": 8, "n_bins": 16, "steps": 300, "epochs": 20}},
+           "models": [{"dataset": "d", "mode": "MD", "steps": 50}]}
+    model, train = systems.train_settings(cfg, "d", "MD")
+    assert model["system"] == "manydepth" and model["base_channels"] == 8 and model["n_bins"] == 16
+    assert train["steps"] == 50 and train["epochs"] == 20 and train["batch_size"] == 4
+    model, train = systems.train_settings(cfg, "d", "M")
+    assert model["system"] == "monodepth2" and model["base_channels"] == 16 and train["epochs"] == 0
+    assert systems.input_size((64, 208), 0.5) == (32, 104)
+    assert isinstance(systems.build({**model, "height": 1, "width": 1, "mode": "M"})["depth_encoder"],
+                      networks.ResNetEncoder)
