@@ -1,5 +1,5 @@
-"""Procedural content of an urban scene: road cross-section, buildings, poles, trees, parked rows and
-moving traffic (cars following the ego vehicle in its lane, oncoming cars), and their state per frame.
+"""Procedural content of an urban scene: road cross-section, buildings, poles, trees, street furniture,
+parked rows and moving traffic (cars following the ego vehicle in its lane, oncoming cars), and their state per frame.
 """
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import numpy as np
 
 from .common import heading_frames
 from .ego import EgoTrack, make_ego
-from .prims import KIND_BUILDING, KIND_CROWN, KIND_POLE, KIND_TRUNK, STYLE_INDEX, Prims, car_prims
+from .prims import KIND_BARRIER, KIND_BUILDING, KIND_CROWN, KIND_POLE, KIND_TRUNK, STYLE_INDEX, Prims, car_prims
 from .road import Road, make_road
 from .textures import Style
 
@@ -171,6 +171,28 @@ def _props(rng, road, x_lo, x_hi, hw, sw, dom):
     return Prims.concat([boxes, spheres])
 
 
+def _clutter(rng, road, x_lo, x_hi, hw, sw, ccfg) -> Prims:
+    """Street furniture on both sidewalks (bins, cabinets, skips, kiosks: `world.clutter`): Poisson
+    `per_100m` objects per 100 m of each sidewalk, a kind drawn by its share, each dimension uniform in the
+    kind's range, aligned with the road, standing on the ground between the kerb and the sidewalk's edge."""
+    kinds = list(ccfg["kinds"].values())
+    share = np.array([k["share"] for k in kinds], dtype=np.float64)
+    centres, halves = [], []
+    for side in (1.0, -1.0):
+        n = rng.poisson(ccfg["per_100m"] * (x_hi - x_lo) / 100.0) if ccfg["per_100m"] > 0 else 0
+        for x in rng.uniform(x_lo, x_hi, n):
+            k = kinds[rng.choice(len(kinds), p=share / share.sum())]
+            size = np.array([rng.uniform(*k[d]) for d in ("length", "width", "height")])
+            room = max(sw - 0.6 - size[1], 0.0)
+            y = side * (hw + 0.3 + size[1] / 2 + rng.uniform(0.0, room))
+            z = float(road.height(np.array([x]), np.array([y]))[0])
+            centres.append([x, y, z + size[2] / 2 - 0.05])  # from 0.1 m below the ground (no gap on a
+            halves.append(size / 2 + np.array([0.0, 0.0, 0.05]))  # cambered walk) to its height above it
+    n = len(centres)
+    return Prims.boxes(np.array(centres).reshape(n, 3), np.repeat(np.eye(3)[None], n, 0),
+                       np.array(halves).reshape(n, 3), KIND_BARRIER, np.arange(n))
+
+
 def make_style(seed: int, dom: dict, road_cfg: dict, lane_lines, lane_centres, crossings, road_half,
                sidewalk_width) -> Style:
     pal = dom["palette"]
@@ -269,7 +291,8 @@ def build_world(cfg: dict, dom: dict, rng: np.random.Generator, n_frames: int) -
     bprims = Prims.boxes(buildings["center"], np.repeat(np.eye(3)[None], nb, 0), buildings["half"],
                          KIND_BUILDING, np.arange(nb))
     static = Prims.concat([bprims, _props(rng, road, x_lo, x_hi, hw, sw, dom),
-                           car_prims(pos, prot, psize, np.arange(n_parked), pstyle)])
+                           car_prims(pos, prot, psize, np.arange(n_parked), pstyle),
+                           _clutter(rng, road, x_lo, x_hi, hw, sw, cfg["clutter"])])
     return World(road, style, ego, static, cars, buildings, movers)
 
 
