@@ -82,7 +82,7 @@ def write_clips(world_cfg: dict, clips_cfg: dict, split: str, seed: int, out_dir
         (tmp / "calibration.txt").write_text(f"{K[0, 0]:.6f} {K[1, 1]:.6f} {K[0, 2]:.6f} {K[1, 2]:.6f}\n"
                                              f"{clips_cfg['camera_height']:.4f}\n")
         for c in range(spec["clips"]):
-            rng = derive_rng(seed, "clip", SPLIT_CODES[split], c)
+            rng = derive_rng(seed, "clip", SPLIT_CODES.get(split, split), c)   # val: a split of the clips only
             mw = build_motorway(world_cfg, clips_cfg, dom, rng, spec["velocity_scale"])
             view = SceneView(mw.road, mw.style, mw.cars, mw.buildings)
             folder = tmp / "clips" / str(c + 1) / "imgs"
