@@ -159,3 +159,50 @@ def test_parent_description_names_the_filter(work, monkeypatch):
     assert tracking.table_filter(T2) not in client.get_run(reg["parents"]["world"]).data.tags["mlflow.note.content"]
     # the filter from the description is a valid MLflow search (no runs yet)
     assert _filtered(client, reg, T2) == []
+
+
+# ---------------------------------------------------------------------------------- datasets as inputs
+def test_dataset_inputs_group_and_digest(work):
+    prepared = Path("results/prepared/ds1")
+    prepared.mkdir(parents=True)
+    (prepared / "a.npz").write_bytes(b"a" * 1000)
+    (prepared / "b.npz").write_bytes(bytes(range(256)) * 1024)  # 256 KiB: head and tail sampled
+    scene = Path("results/raw/ds2/train_000")
+    (scene / "cam").mkdir(parents=True)
+    (scene / "cam" / "0.png").write_bytes(b"png")
+    (scene / "poses.txt").write_text("1 0 0\n")
+    files = [str(prepared / "a.npz"), str(prepared / "b.npz"), str(scene), "results/tables/t.md"]
+    out = runlog.dataset_inputs(files, "training")
+    assert [(d["name"], d["source"], d["files"], d["bytes"], d["context"]) for d in out] == [
+        ("ds1/prepared", "results/prepared/ds1", 2, 1000 + 256 * 1024, "training"),
+        ("ds2/raw", "results/raw/ds2", 2, 3 + 6, "training")]
+    assert runlog.dataset_inputs(files, "training") == out  # same files: same digest
+    (prepared / "a.npz").write_bytes(b"b" + b"a" * 999)
+    changed = runlog.dataset_inputs(files, "training")
+    assert changed[0]["digest"] != out[0]["digest"] and changed[1]["digest"] == out[1]["digest"]
+
+
+def test_datasets_become_run_inputs(work, monkeypatch):
+    import sys as _sys
+    from types import SimpleNamespace
+
+    from mlflow.tracking import MlflowClient
+
+    data = Path("results/prepared/world_kitti/train_000")
+    data.mkdir(parents=True)
+    (data / "cam_front.npz").write_bytes(b"x" * 100)
+    monkeypatch.setattr(_sys.modules["__main__"], "snakemake",
+                        SimpleNamespace(input=[str(data / "cam_front.npz")]), raising=False)
+    with runlog.child_run(work["runs"] / "depth" / "models" / "m.json", T1, "train m", rule="train_depth",
+                          wildcards={}, config={"profile": "tiny"}):
+        pass
+    reg = tracking.sync_records(work["uri"], PLAN, work["runs"], work["registry"],
+                                artifact_root=work["results"] / "mlartifacts")
+    client = MlflowClient(work["uri"])
+    [run] = client.search_runs(list(reg["experiments"].values()), "attributes.run_name = 'train m'")
+    [inp] = run.inputs.dataset_inputs
+    record = json.loads((work["runs"] / "depth" / "models" / "m.json").read_text())
+    assert inp.dataset.name == "world_kitti/prepared" and inp.dataset.digest == record["datasets"][0]["digest"]
+    assert inp.dataset.source == "results/prepared/world_kitti"
+    assert {t.key: t.value for t in inp.tags}["mlflow.data.context"] == "training"
+    assert json.loads(inp.dataset.profile) == {"files": 1, "bytes": 100}

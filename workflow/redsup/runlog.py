@@ -16,12 +16,14 @@ process is gone (or at the end of the Snakemake invocation), never as RUNNING.
 from __future__ import annotations
 
 import contextlib
+import hashlib
 import json
 import os
 import shutil
 import signal
 import socket
 import subprocess
+import sys
 import threading
 import time
 import uuid
@@ -149,6 +151,53 @@ class RunRecord:
         os.replace(tmp, self.path)
 
 
+DATASET_KINDS = ("prepared", "raw")  # results/<kind>/<dataset>/...: what enters a run as an MLflow dataset
+_SAMPLE = 1 << 16
+
+
+def _job_input_files() -> list[str]:
+    """The input files of the Snakemake job whose script is running (its ``snakemake`` object), else none."""
+    sm = getattr(sys.modules.get("__main__"), "snakemake", None)
+    try:
+        return [str(f) for f in sm.input] if sm is not None else []
+    except (AttributeError, TypeError):
+        return []
+
+
+def dataset_inputs(files, context: str) -> list[dict]:
+    """The datasets among a job's input files: one entry per ``results/<prepared|raw>/<dataset>/`` folder, with
+    a digest of its files (path, size and the first and last 64 KiB of each: cheap for large arrays, and any
+    re-preparation changes it), the file count and bytes. What the sync logs as the run's MLflow inputs."""
+    groups: dict[tuple[str, str], list[Path]] = {}
+    for f in files:
+        parts = Path(f).parts
+        if len(parts) >= 3 and parts[0] == "results" and parts[1] in DATASET_KINDS:
+            groups.setdefault((parts[1], parts[2]), []).append(Path(f))
+    out = []
+    for (kind, name), paths in sorted(groups.items()):
+        digest, n_files, n_bytes = hashlib.sha256(), 0, 0
+        for path in sorted(set(paths)):
+            members = sorted(q for q in path.rglob("*") if q.is_file()) if path.is_dir() else [path]
+            for q in members:
+                if not q.is_file():
+                    continue
+                size = q.stat().st_size
+                n_files, n_bytes = n_files + 1, n_bytes + size
+                digest.update(f"{q.as_posix()}\0{size}\0".encode())
+                with open(q, "rb") as fh:
+                    digest.update(fh.read(_SAMPLE))
+                    if size > 2 * _SAMPLE:
+                        fh.seek(-_SAMPLE, os.SEEK_END)
+                        digest.update(fh.read())
+        out.append({"name": f"{name}/{kind}", "digest": digest.hexdigest()[:20], "source": f"results/{kind}/{name}",
+                    "context": context, "files": n_files, "bytes": n_bytes})
+    return out
+
+
+def _context(rule: str) -> str:
+    return "training" if "train" in rule else "evaluation" if "eval" in rule else "input"
+
+
 class RunKilled(BaseException):
     """Raised inside a child run when the process receives SIGTERM / SIGINT."""
 
@@ -209,6 +258,10 @@ def child_run(record_path: str | Path, parent: str, run_name: str, *, rule: str,
     try:
         with _signals_raise():
             yield record
+        try:
+            data["datasets"] = dataset_inputs(_job_input_files(), _context(rule))
+        except OSError as exc:  # tracking never fails a job
+            print(f"run record: datasets not summarised ({exc})", file=sys.stderr)
         data["status"] = "FINISHED"
     except RunKilled as exc:
         killed = exc

@@ -257,7 +257,19 @@ def _import_record(client, data: dict, rid: str, experiment_id: str, parent_id: 
     return run_id
 
 
+def _log_datasets(client, run_id: str, datasets: list[Mapping[str, Any]]) -> None:
+    """The prepared / raw datasets a job read (`runlog.dataset_inputs`) as the run's MLflow inputs."""
+    from mlflow.entities import Dataset, DatasetInput, InputTag
+
+    inputs = [DatasetInput(Dataset(d["name"], d["digest"], "local", d["source"],
+                                   profile=json.dumps({"files": d["files"], "bytes": d["bytes"]})),
+                           tags=[InputTag("mlflow.data.context", d["context"])]) for d in datasets]
+    if inputs:
+        _retry(client.log_inputs, run_id, datasets=inputs)
+
+
 def _finish(client, run_id: str, parent_id: str, data: Mapping[str, Any], status: str) -> None:
+    _log_datasets(client, run_id, data.get("datasets") or [])
     for path, artifact_path in data["artifacts"]:
         _log_path(client, run_id, path, artifact_path)
     for path, artifact_path in data.get("parent_artifacts", []):
