@@ -10,6 +10,7 @@ The figure specs are config data (``depth.figures.<id>``); ``figure_models`` lis
 """
 from __future__ import annotations
 
+import textwrap
 from collections.abc import Mapping, Sequence
 
 import numpy as np
@@ -69,7 +70,7 @@ def progression(runs: Sequence[tuple[str, Sequence[Mapping], int]], title: str):
     for ax in axes:
         ax.legend(fontsize=6)
         ax.grid(alpha=0.3)
-    fig.suptitle(title, fontsize=9)
+    fig.suptitle(textwrap.fill(title, 150), fontsize=9)
     fig.tight_layout()
     return fig
 
@@ -95,7 +96,7 @@ def qualitative(images: np.ndarray, predictions: Sequence[tuple[str, np.ndarray]
     for ax in axes.ravel():
         ax.set_xticks([])
         ax.set_yticks([])
-    fig.suptitle(title, fontsize=9)
+    fig.suptitle(textwrap.fill(title, 150), fontsize=8)
     fig.tight_layout()
     return fig
 
