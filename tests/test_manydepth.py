@@ -118,6 +118,7 @@ def test_augmented_batch_is_all_unreliable_and_frozen_teacher():
     assert torch.equal(models["depth_range"].d_min, before[0]) and torch.equal(models["depth_range"].d_max, before[1])
     terms["loss"].backward()
     assert all(g is None for g in _grads(models, ["teacher_encoder", "pose_encoder", "pose_decoder"]))
+    assert not models["teacher_encoder"].training and models["depth_encoder"].training
 
 
 def test_prediction_with_and_without_previous_frame():

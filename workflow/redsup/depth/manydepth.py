@@ -40,6 +40,7 @@ from torch import nn
 from redsup.depth import networks, pipeline, warping
 
 TEACHER = {"depth_encoder": "teacher_encoder", "depth_decoder": "teacher_decoder"}
+FROZEN = ("teacher_encoder", "teacher_decoder", "pose_encoder", "pose_decoder")  # after ManydepthLoss.freeze_at
 
 
 # ------------------------------------------------------------------------------------------------ bins
@@ -266,6 +267,8 @@ class ManydepthLoss:
         target, size = batch["target"], tuple(batch["target"].shape[-2:])
         teacher = teacher_view(models)
         if frozen:
+            for name in FROZEN:  # frozen networks also keep their BatchNorm statistics
+                models[name].eval()
             with torch.no_grad():
                 transforms = pipeline.source_transforms(models, batch)
                 t_disps = pipeline.predict_disparities(teacher, target)
