@@ -41,5 +41,5 @@ def report_figure(path):
 
 
 def report_fixed(path, caption, name, ext):
-    """An output without wildcards (overview figure, scorecard, run time) in the category "workflow"."""
-    return report(path, caption=caption, category="workflow", subcategory=name, labels={"id": name, "file": ext})
+    """An output without wildcards (overview figure, scorecard, run time) in the category "run summary"."""
+    return report(path, caption=caption, category="run summary", subcategory=name, labels={"id": name, "file": ext})
