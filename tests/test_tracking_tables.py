@@ -144,6 +144,8 @@ def test_every_table_filter_returns_exactly_its_runs(work):
     assert len(all_only2) == 2
     old = [r for r in all_only2 if r.data.params["note"] == ""][0]
     assert not any(k.startswith("redsup.table") for k in old.data.tags)
+    assert old.data.tags["redsup.superseded"] == "1"
+    assert all("redsup.superseded" not in r.data.tags for r in served)
     assert sync()["imported"] == 0 and sync()["updated"] == 0
 
 

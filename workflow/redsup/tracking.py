@@ -335,6 +335,7 @@ TAG_TABLE_PREFIX = "redsup.table."   # + table id = "1" on every child run whose
 TAG_TABLES = "redsup.tables"         # the same ids, comma-separated (a readable column in the UI)
 TAG_RECORD_PATH = "redsup.record_path"
 TAG_ARTIFACTS_SHA1 = "redsup.artifacts_sha1"
+TAG_SUPERSEDED = "redsup.superseded"  # "1": a later attempt of the same job replaced this run
 
 
 def table_filter(table_id: str) -> str:
@@ -514,6 +515,9 @@ def _sync_records(tracking_uri, plan, runs_root: Path, out_json, *, artifact_roo
             continue
         if run.info.status == "RUNNING":  # its record vanished while it ran
             _retry(client.set_terminated, run.info.run_id, "KILLED")
+        if run.data.tags.get(TAG_SUPERSEDED) != "1":  # history: filter it out with tags.`redsup.superseded` != '1'
+            _retry(client.set_tag, run.info.run_id, TAG_SUPERSEDED, "1")
+            updated += 1
         updated += bool(_reconcile(client, run, {}, {}, 0))
     parents_logged = _sync_parent_artifacts(client, registry, list(table_ids or []), results_root)
     registry.update({"imported": imported, "updated": updated, "deleted": deleted, "records": len(records),
