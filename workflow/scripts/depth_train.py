@@ -62,7 +62,8 @@ with child_run(sm.log.run, parent, f"train {sm.wildcards.model}", rule=sm.rule, 
         val_every = max(1, int(tcfg["steps"]) // int(tcfg["epochs"]))
 
         def validate(step):  # one validation pass per "epoch": the seven metrics with the step (MLflow curves)
-            metrics = experiments.validation_metrics(models, meta, val, cfg["eval"], cfg["eval"]["frames"]["all"])
+            frames = cfg["eval"]["frames"].get("val", cfg["eval"]["frames"]["all"])
+            metrics = experiments.validation_metrics(models, meta, val, cfg["eval"], frames)
             run.log_metrics({f"val_{k}": v for k, v in metrics.items()}, step=step)
             print(f"validation at step {step}: " + ", ".join(f"{k} {v:.4g}" for k, v in metrics.items()), flush=True)
             return metrics
