@@ -408,3 +408,81 @@ def test_mlp_checkpoint_is_the_one_format_with_the_config(tmp_path):
     assert meta["network"] == model.config and not list(tmp_path.glob("*.part"))
     with pytest.raises(ValueError, match="expected 'depth'"):
         checkpoint.load(path, "depth")
+
+
+# ------------------------------------------------------------------ geometric diagnosis, smoothing protocol
+def test_geometric_diagnosis_on_exact_boxes_by_hand():
+    from redsup.velocity.diagnosis import diagnosis_note, geometric_diagnosis
+
+    tracks = _fake_training(n=60, seed=4)
+    d = geometric_diagnosis(tracks, FPS)
+    for name in ("diff", "lsq10"):   # exact boxes, constant velocity: eq. (1) gives Z_t exactly, linear in t
+        assert d[f"E_v_{name}"] == pytest.approx(0.0, abs=1e-9)
+    # smoothing repeats the edge value: the last-frame derivative of smoothed boxes is damped towards zero
+    assert 0 < d["E_v_smooth5_diff"] < np.mean(np.sum(tracks.velocity ** 2, axis=1))
+    assert d["E_p_far"] == pytest.approx(0.0, abs=1e-12)
+    far = tracks.bins == 2
+    z_med = np.median(tracks.position[far, 1])
+    assert d["dz_per_px_far"] == pytest.approx(z_med ** 2 / (710.0 * 1.8))
+    # box bottom below the horizon: fy H / Z at the last frame (median)
+    assert d["horizon_px_far"] == pytest.approx(np.median(710.0 * 1.8 / tracks.position[far, 1]))
+    # one pixel of jitter on the far boxes' bottom edge in the last frame: the backward difference error is
+    # fps x dZ of that pixel, the 10-frame line dilutes it
+    noisy = tracks.subset(np.ones(len(tracks), bool))
+    noisy.boxes = noisy.boxes.copy()
+    noisy.boxes[:, -1, 1] += 1.0
+    n = geometric_diagnosis(noisy, FPS)
+    assert n["E_v_diff_far"] > 10 * n["E_v_lsq10_far"] > 0
+    note = diagnosis_note({f"test_geo_{k}": v for k, v in n.items()})
+    assert "backward difference" in note and f"{n['E_v_diff_far']:.3g}" in note
+
+
+def test_smoothing_protocol_per_training_data():
+    from redsup.velocity.experiment import smoothing_of
+
+    smoothing = {"tracker": {"train": 0.0, "test": 0.0}, "synthetic": {"train": 0.0, "test": 5.0}}
+    assert smoothing_of({"train_on": "tracker"}, smoothing) == (0.0, 0.0)
+    assert smoothing_of({"train_on": "synthetic"}, smoothing) == (0.0, 5.0)
+
+
+def test_run_mlp_monitors_val_only(one_thread):
+    from redsup.velocity.experiment import run_mlp
+
+    train, val, test = _fake_training(120, 1), _fake_training(30, 2), _fake_training(30, 3)
+    cfg = {"hidden": 8, "layers": 1, "dropout": 0.0, "lr": 1e-3, "lr_decay": 1.0, "epochs": 2,
+           "epochs_synthetic": 1, "batch_size": 32, "timing_repeats": 2, "features": "relative"}
+    smoothing = {"tracker": {"train": 0.0, "test": 0.0}, "synthetic": {"train": 0.0, "test": 5.0}}
+    metrics, _, _, curve = run_mlp({"name": "t", "train_on": "tracker"}, cfg, smoothing, 0, train,
+                                   {"val": val, "test": test}, None, 0)
+    assert set(curve[0]) == {"train_loss", "lr", "val_loss"}
+    assert np.isfinite(metrics["val_E_v"]) and np.isfinite(metrics["test_E_v"])
+    assert metrics["smoothing_sigma_test"] == 0.0
+
+
+def test_track_statistics_by_hand():
+    from redsup.velocity.summary import fig6_table, track_statistics
+
+    velocity = np.array([[0.0, 1.0], [0.0, -1.0], [0.5, 3.0], [-0.5, -3.0]])   # [vx, vz]
+    position = np.array([[0.0, 10.0], [0.0, 15.0], [0.0, 60.0], [0.0, 70.0]])  # [x, z]
+    st = track_statistics(velocity, position)
+    assert (st["share near"], st["share medium"], st["share far"]) == (0.5, 0.0, 0.5)
+    assert st["std v_z near (m/s)"] == pytest.approx(1.0) and st["std v_z far (m/s)"] == pytest.approx(3.0)
+    assert st["std v_z (m/s)"] == pytest.approx(np.sqrt(5.0)) and st["std v_x (m/s)"] == pytest.approx(np.sqrt(0.125))
+    assert math.isnan(st["std v_z medium (m/s)"])
+    boxes = np.zeros((4, 3, 4))
+    t = fig6_table(boxes, boxes, {"frame rate": 20}, st, st)
+    assert t.at["synthetic", "share far"] == 0.5 and t.at["frame rate", "value"] == 20
+
+
+def test_relative_box_features_by_hand():
+    boxes = np.zeros((1, 3, 4))
+    boxes[0, :, :] = [[640.0, 360.0, 71.4, 71.0], [650.0, 360.0, 71.4, 71.0], [660.0, 367.1, 71.4, 71.0]]
+    f = mlp.box_features(boxes, CAL, 0.0, "relative")
+    assert f.shape == (1, 16)
+    # the last box standardised: (660 - 640) / 714, (367.1 - 360) / 710, 71.4 / 714, 71 / 710
+    np.testing.assert_allclose(f[0, :4], [20 / 714, 0.01, 0.1, 0.1], rtol=1e-5)
+    # frame 1 minus the last, over the last height 0.1: x (-20 / 714) / 0.1, y (-0.01) / 0.1, w 0, h 0
+    np.testing.assert_allclose(f[0, 4:8], [-20 / 714 / 0.1, -0.1, 0.0, 0.0], rtol=1e-5, atol=1e-7)
+    np.testing.assert_allclose(f[0, -4:], 0.0, atol=1e-7)     # the last frame itself
+    with pytest.raises(ValueError, match="mode"):
+        mlp.box_features(boxes, CAL, 0.0, "polar")

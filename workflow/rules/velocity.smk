@@ -15,7 +15,8 @@ import redsup.velocity.plan as velocity_plan
 VELOCITY_RUNS = velocity_plan.runs(config)
 VELOCITY_BASELINES = [r for r, s in VELOCITY_RUNS.items() if s.get("method") in ("geometric", "constant")]
 VELOCITY_MLP = [r for r, s in VELOCITY_RUNS.items() if s.get("method") == "mlp"]
-VELOCITY_EVAL_SPLITS = [s for s in ("test", "abnormal") if s in CLIP_SPLIT_NAMES]
+# val: knobs are chosen on it (and the MLP training curves monitor it); test / abnormal: the tables
+VELOCITY_EVAL_SPLITS = [s for s in ("val", "test", "abnormal") if s in CLIP_SPLIT_NAMES]
 VELOCITY_FIGURES = [t for s in VELOCITY_RUNS.values() if "figure" in s for t in s["tables"]]
 
 

@@ -14,7 +14,7 @@ from redsup.fileio import write_text_atomic  # noqa: E402
 from redsup.prep.seeds import derive_seed  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
 from redsup.velocity.data import load_split  # noqa: E402
-from redsup.velocity.summary import fig3_table, fig3_values, fig6_table  # noqa: E402
+from redsup.velocity.summary import fig3_table, fig3_values, fig6_table, track_statistics  # noqa: E402
 from redsup.velocity.synthetic import generate_tracks  # noqa: E402
 
 sm = snakemake  # noqa: F821
@@ -31,13 +31,16 @@ def vehicle_statistics(train, stats):
 def sequences(train, stats):
     real = train.boxes[train.usable]
     rng = np.random.default_rng(derive_seed(sm.config["seed"], "velocity", "fig6"))
-    synthetic = generate_tracks(stats, max(len(real), 1), rng)["boxes"]
+    generated = generate_tracks(stats, max(len(real), 1), rng)
+    synthetic = generated["boxes"]
+    closeness = (track_statistics(train.velocity[train.usable], train.position[train.usable]),
+                 track_statistics(generated["velocity"], generated["position"]))
     k = vcfg["figure_tracks"]
     show = rng.permutation(len(real))[:k]
     settings = {"sequence length": stats["n_frames"], "frame rate": stats["fps"],
                 "synthetic training samples": vcfg["synthetic"]["samples"],
-                "test-time Gaussian smoothing sigma": vcfg["smoothing_sigma"]}
-    return fig6_table(real, synthetic, settings), {"real": real[show], "synthetic": synthetic[:k]}
+                "test-time Gaussian smoothing sigma": vcfg["smoothing"]["synthetic"]["test"]}
+    return fig6_table(real, synthetic, settings, *closeness), {"real": real[show], "synthetic": synthetic[:k]}
 
 
 def _plain(x):

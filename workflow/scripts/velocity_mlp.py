@@ -27,7 +27,7 @@ seed = derive_seed(sm.config["seed"], "velocity", configuration["name"])  # seed
 seed = seed if spec["seed_index"] == 0 else derive_seed(seed, "seed", str(spec["seed_index"]))
 device = resolve_device(vcfg["device"])
 params = {"configuration": configuration, "seed_index": spec["seed_index"], "tables": spec["tables"],
-          "mlp": vcfg["mlp"], "smoothing_sigma": vcfg["smoothing_sigma"],
+          "mlp": vcfg["mlp"], "smoothing": vcfg["smoothing"],
           "synthetic": vcfg["synthetic"], "min_box_px": vcfg["min_box_px"], "seed": seed, "device": device}
 with child_run(sm.log.run, plan.parent(sm.config, configuration["name"]), sm.wildcards.run, rule=sm.rule,
                wildcards=dict(sm.wildcards), config=sm.config, params=params) as run:
@@ -39,11 +39,11 @@ with child_run(sm.log.run, plan.parent(sm.config, configuration["name"]), sm.wil
     def on_epoch(epoch, row):
         run.log_metrics(row, step=epoch)
 
-    metrics, predictions, model, curve = run_mlp(configuration, vcfg["mlp"], vcfg["smoothing_sigma"],
+    metrics, predictions, model, curve = run_mlp(configuration, vcfg["mlp"], vcfg["smoothing"],
                                                  vcfg["synthetic"]["samples"], train, splits, stats, seed,
                                                  on_epoch=on_epoch, device=device)
     save_model(model, sm.output.model, sm.config, {"configuration": configuration, "seed": seed,
-                                                   "smoothing_sigma": vcfg["smoothing_sigma"],
+                                                   "smoothing": vcfg["smoothing"][configuration["train_on"]],
                                                    "calibration": train.calib.as_dict()})
     write_configuration_outputs(configuration, metrics, predictions, splits, sm.output.metrics, sm.output.predictions)
     run.log_metrics(metrics)

@@ -18,6 +18,7 @@ import time
 import numpy as np
 
 from redsup.velocity.data import TrackSet
+from redsup.velocity.diagnosis import geometric_diagnosis
 from redsup.velocity.geometry import geometric_velocity
 from redsup.velocity.metrics import tusimple_metrics
 
@@ -55,6 +56,7 @@ def run_geometric(splits: dict[str, TrackSet], fps: float, window: int,
         out = geometric_velocity(tracks.boxes, tracks.calib, fps, window)
         metrics.update(evaluate(split, tracks, out["velocity"], out["position"]))
         metrics[f"{split}_n_geometric_invalid"] = int((~out["valid"]).sum())
+        metrics.update({f"{split}_geo_{k}": v for k, v in geometric_diagnosis(tracks, fps).items()})
         predictions[split] = {"velocity": out["velocity"], "position": out["position"]}
     any_tracks = next((t for t in splits.values() if len(t)), None)
     if any_tracks is not None:
@@ -99,34 +101,46 @@ def epochs_of(configuration: dict, mlp_cfg: dict) -> int:
     return mlp_cfg["epochs_synthetic"] if configuration.get("train_on") == "synthetic" else mlp_cfg["epochs"]
 
 
-def run_mlp(configuration: dict, mlp_cfg: dict, sigma: float, samples: int, train: TrackSet,
+def smoothing_of(configuration: dict, smoothing: dict) -> tuple[float, float]:
+    """(train sigma, test sigma) of the temporal Gaussian g for a configuration (config velocity.smoothing,
+    keyed by train_on; thesis: only MLP-synthetic, only at test time, sigma 5)."""
+    s = smoothing[configuration["train_on"]]
+    return float(s["train"]), float(s["test"])
+
+
+def run_mlp(configuration: dict, mlp_cfg: dict, smoothing: dict, samples: int, train: TrackSet,
             splits: dict[str, TrackSet], stats: dict | None, seed: int,
             on_epoch=None, device: str = "cpu") -> tuple[dict, dict, object, list[dict]]:
     """(metrics, predictions, model, curve) of one MLP configuration: train, then evaluate every split.
-    Features use each split's own calibration (synthetic tracks: the training clips' calibration)."""
+    Features use each split's own calibration (synthetic tracks: the training clips' calibration). The
+    training curve monitors the `val` split only (when given); no split selects anything here."""
     from redsup.velocity import mlp
 
+    sigma_train, sigma_test = smoothing_of(configuration, smoothing)
     rng = np.random.default_rng(seed)
     boxes, targets, counts = training_tracks(configuration, train, stats, samples, rng)
-    features = mlp.box_features(boxes, train.calib, sigma)
-    eval_sets = {split: (mlp.box_features(t.boxes, t.calib, sigma), t.velocity) for split, t in splits.items()}
+    mode = mlp_cfg.get("features", "absolute")
+    features = mlp.box_features(boxes, train.calib, sigma_train, mode)
+    eval_feats = {split: mlp.box_features(t.boxes, t.calib, sigma_test, mode) for split, t in splits.items()}
+    monitor = {"val": (eval_feats["val"], splits["val"].velocity)} if "val" in splits else None
     wall, cpu = time.perf_counter(), time.process_time()
     model, curve = mlp.train_mlp(features, targets, hidden=mlp_cfg["hidden"], layers=mlp_cfg["layers"],
                                  dropout=mlp_cfg["dropout"], lr=mlp_cfg["lr"], lr_decay=mlp_cfg["lr_decay"],
                                  epochs=epochs_of(configuration, mlp_cfg), batch_size=mlp_cfg["batch_size"], seed=seed,
-                                 eval_sets=eval_sets, on_epoch=on_epoch, device=device)
+                                 eval_sets=monitor, on_epoch=on_epoch, device=device)
     metrics = dict(counts)
     metrics["train_seconds"] = time.perf_counter() - wall
     metrics["train_cpu_seconds"] = time.process_time() - cpu
     metrics["train_loss_final"] = curve[-1]["train_loss"]
     metrics["train_epochs"] = len(curve)
+    metrics["smoothing_sigma_train"], metrics["smoothing_sigma_test"] = sigma_train, sigma_test
     predictions = {}
     for split, tracks in splits.items():
-        v = mlp.predict(model, eval_sets[split][0]) if len(tracks) else np.zeros((0, 2))
+        v = mlp.predict(model, eval_feats[split]) if len(tracks) else np.zeros((0, 2))
         metrics.update(evaluate(split, tracks, v))
         predictions[split] = {"velocity": v}
     any_tracks = next((t for t in splits.values() if len(t)), None)
     if any_tracks is not None:
-        metrics.update(mlp.forward_time_ms(model, any_tracks.boxes, any_tracks.calib, sigma,
-                                           mlp_cfg["timing_repeats"]))
+        metrics.update(mlp.forward_time_ms(model, any_tracks.boxes, any_tracks.calib, sigma_test,
+                                           mlp_cfg["timing_repeats"], mode))
     return metrics, predictions, model, curve

@@ -56,12 +56,29 @@ class VelocityMLP(nn.Module):
         return self.net((x - self.mean) / self.std)
 
 
-def box_features(boxes: np.ndarray, calib: Calibration, sigma: float) -> np.ndarray:
-    """vec(g(b)) of tracks (N, T, 4) in standardised image coordinates: float32 (N, 4T)."""
+FEATURES = ("absolute", "relative")
+
+
+def box_features(boxes: np.ndarray, calib: Calibration, sigma: float, mode: str = "absolute") -> np.ndarray:
+    """vec(g(b)) of tracks (N, T, 4) in standardised image coordinates: float32 (N, 4T).
+
+    mode "absolute" (the thesis): the T standardised boxes. mode "relative": the same track as the last
+    standardised box (4 values: where and how large the vehicle is) followed by every frame's change from
+    the last box divided by the last box's standardised height (4T values: motion relative to the apparent
+    size, the scale-free form of dZ / Z), so the motion is not a small difference of large, strongly
+    correlated inputs: (N, 4T + 4)."""
+    if mode not in FEATURES:
+        raise ValueError(f"unknown box feature mode {mode!r} (have {FEATURES})")
     b = gaussian_smooth(boxes, sigma)
     norm = np.stack([(b[..., 0] - calib.cx) / calib.fx, (b[..., 1] - calib.cy) / calib.fy,
                      b[..., 2] / calib.fx, b[..., 3] / calib.fy], axis=-1)
-    return norm.reshape(norm.shape[0], norm.shape[-2] * 4).astype(np.float32)
+    n, T = norm.shape[0], norm.shape[-2]
+    if mode == "absolute":
+        return norm.reshape(n, T * 4).astype(np.float32)
+    last = norm[:, -1, :]
+    scale = np.maximum(last[:, 3:4], 1e-4)[:, None, :]
+    rel = (norm - last[:, None, :]) / scale
+    return np.concatenate([last, rel.reshape(n, T * 4)], axis=1).astype(np.float32)
 
 
 def velocity_loss(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
@@ -157,7 +174,7 @@ def load_model(path) -> tuple[VelocityMLP, dict]:
 
 
 def forward_time_ms(model: VelocityMLP, boxes: np.ndarray, calib: Calibration, sigma: float,
-                    repeats: int = 200) -> dict[str, float]:
+                    repeats: int = 200, mode: str = "absolute") -> dict[str, float]:
     """Time per track of the whole estimator Psi (smoothing, features, forward pass, result back on the
     CPU), one track at a time, on the model's device and the current torch threads: median and 90th
     percentile over `repeats` calls (after 10 warm-up calls)."""
@@ -167,7 +184,7 @@ def forward_time_ms(model: VelocityMLP, boxes: np.ndarray, calib: Calibration, s
 
     def once():
         with torch.no_grad():
-            model(torch.from_numpy(box_features(track, calib, sigma)).to(device)).cpu()
+            model(torch.from_numpy(box_features(track, calib, sigma, mode)).to(device)).cpu()
 
     for _ in range(10):
         once()

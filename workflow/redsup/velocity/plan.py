@@ -94,4 +94,4 @@ def table_frame(table_id: str, config: Mapping, rows: Sequence[tuple], results: 
         ours, noise = report.counts_table(results["clip_counts"]), {}
     else:
         ours, noise = report.figure_table(results[f"figure_{table_id}"]), {}
-    return TableFrame(ours, noise, report.table_note(config, tc))
+    return TableFrame(ours, noise, report.table_note(config, tc, results))

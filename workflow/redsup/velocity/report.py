@@ -135,24 +135,42 @@ def figure_table(record: dict) -> pd.DataFrame:
     return df
 
 
-def table_note(config: dict, table_cfg: dict) -> str:
-    """Caption note: profile, estimator choices and units, the table's own note."""
+def _sigmas(v: dict, train_on: str) -> str:
+    s = v["smoothing"][train_on]
+    return f"{s['train']:g} / {s['test']:g}"
+
+
+def table_note(config: dict, table_cfg: dict, results: dict | None = None) -> str:
+    """Caption note: profile, estimator choices and units, the table's own note; for the errors layout with
+    a geometric row, the baseline's per-bin diagnosis (redsup.velocity.diagnosis) from its run."""
     v = config["velocity"]
     parts = [f"Profile {config['profile']}"]
     if "rows" in table_cfg:
         parts.append("E_v in m^2/s^2 (TuSimple protocol, mean of the near / medium / far bins by ground-truth "
                      "distance), every annotated test vehicle scored")
-        parts.append(f"geometric velocity = slope of the least-squares line through the last "
-                     f"{v['geometric']['window']} eq. (1) ground points (the raw tracker boxes), times the frame rate")
+        w = v["geometric"]["window"]
+        parts.append("geometric velocity = " + ("the last-frame derivative (P_T - P_T-1) x fps" if w == 2 else
+                     f"slope of the least-squares line through the last {w}") + " of the eq. (1) ground points "
+                     "of the raw tracker boxes")
         parts.append(f"MLPs: {v['mlp']['layers']} x {v['mlp']['hidden']} CReLU, dropout {v['mlp']['dropout']}, "
                      f"{v['mlp']['epochs']} epochs on tracker boxes, {v['mlp']['epochs_synthetic']} on generated "
-                     f"tracks, batch {v['mlp']['batch_size']}, Gaussian sigma {v['smoothing_sigma']:g} on inputs at "
-                     f"training and test time; synthetic tracks: {v['synthetic']['samples']} x samples_factor; "
+                     f"tracks, batch {v['mlp']['batch_size']}; Gaussian smoothing sigma (frames) train / test: "
+                     f"MLP-tracker {_sigmas(v, 'tracker')}, MLP-synthetic {_sigmas(v, 'synthetic')}; "
+                     f"input features {v['mlp']['features']}; synthetic tracks: {v['synthetic']['samples']} x samples_factor; "
                      f"{v.get('seeds', 1)} training seeds per MLP (mean ± std over seeds); rows without learning: "
                      "± = bootstrap standard error over the test vehicles")
     if table_cfg.get("note"):
         parts.append(str(table_cfg["note"]).rstrip("."))
+    geometric = [n for n in table_cfg.get("rows", ()) if _method(config, n) == "geometric"]
+    if results and table_cfg.get("layout") == "errors" and geometric and geometric[0] in results:
+        from redsup.velocity.diagnosis import diagnosis_note
+
+        parts.append(diagnosis_note(results[geometric[0]]["metrics"]))
     return "; ".join(parts)
+
+
+def _method(config: dict, name: str) -> str | None:
+    return next((c["method"] for c in config["velocity"]["configurations"] if c["name"] == name), None)
 
 
 def save_figure(fig, path) -> None:

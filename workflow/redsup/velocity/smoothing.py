@@ -1,8 +1,8 @@
 """The filter g of McCraith ch. 3 §III-B: temporal Gaussian smoothing of each box coordinate.
 
-Applied to every MLP input, at training and at test time, so that the model is V = Psi(vec(g(b))) on both
-sides (the thesis applies sigma = 5 to the tracker boxes at test time; we apply the same g to the training
-tracks as well, tracker or synthetic, so train and test inputs see the same filter, ends included).
+Where it is applied is configured per training data and phase (config velocity.smoothing): the thesis
+applies sigma = 5 only to MLP-synthetic, only at test time, to remove from the tracker boxes the noise the
+generated tracks do not have; MLP-tracker sees the raw boxes on both sides.
 Boundary handling: the edge value is repeated (scipy mode "nearest").
 """
 from __future__ import annotations

@@ -163,11 +163,31 @@ def motion_summary(boxes: np.ndarray) -> dict[str, float]:
     return {f"|Δ{c}| over the clip (px)": float(v) for c, v in zip("xywh", change)}
 
 
-def fig6_table(real: np.ndarray, synthetic: np.ndarray, settings: dict[str, float]) -> pd.DataFrame:
-    """Settings rows (value) and the two kinds of sequences (jitter, motion)."""
+def track_statistics(velocity: np.ndarray, position: np.ndarray) -> dict[str, float]:
+    """How close the generator gets (§IV-B): share of the tracks per TuSimple bin (by ||[z, x]|| at the last
+    frame) and the std of v_z and v_x (m/s), overall and in the far bin."""
+    from redsup.datastats import distance_bin
+
+    velocity, position = np.asarray(velocity, dtype=np.float64), np.asarray(position, dtype=np.float64)
+    if len(velocity) == 0:
+        return {}
+    bins = distance_bin(position[:, 1], position[:, 0])
+    out = {f"share {b}": float(np.mean(bins == k)) for k, b in enumerate(BINS)}
+    out["std v_z (m/s)"], out["std v_x (m/s)"] = float(velocity[:, 1].std()), float(velocity[:, 0].std())
+    for k, b in enumerate(BINS):
+        sel = bins == k
+        out[f"std v_z {b} (m/s)"] = float(velocity[sel, 1].std()) if sel.any() else math.nan
+    return out
+
+
+def fig6_table(real: np.ndarray, synthetic: np.ndarray, settings: dict[str, float],
+               real_stats: dict | None = None, synthetic_stats: dict | None = None) -> pd.DataFrame:
+    """Settings rows (value) and the two kinds of sequences (jitter, motion; and `track_statistics` when
+    given: how close the fitted generator's tracks are to the real ones)."""
     rows = {name: {"value": float(v)} for name, v in settings.items()}
-    for label, boxes in (("real (tracker)", real), ("synthetic", synthetic)):
-        rows[label] = {"box size jitter (px)": size_jitter(boxes), **motion_summary(boxes), "n": len(boxes)}
+    for label, boxes, extra in (("real (tracker)", real, real_stats), ("synthetic", synthetic, synthetic_stats)):
+        rows[label] = {"box size jitter (px)": size_jitter(boxes), **motion_summary(boxes), **(extra or {}),
+                       "n": len(boxes)}
     df = pd.DataFrame.from_dict(rows, orient="index")
     df.index.name = "row"
     return df

@@ -1,0 +1,75 @@
+"""Why the geometric baseline of McCraith ch. 3 is as bad as it is: its error per distance bin under
+variations of the derivative protocol, and the quantities that explain it (issue 11 §2).
+
+For every split, on the MedianFlow boxes of every annotated vehicle:
+- `E_v` per bin of the velocity from eq. (1) with the last-frame backward difference (window 2, the
+  thesis' "derivative at the last frame"), with the slope of a 10-frame least-squares line, and with the
+  backward difference of Gaussian-smoothed boxes (sigma 5 frames, the smoothing of MLP-synthetic);
+- `E_p` per bin: the eq. (1) position of the annotated (last-frame) box, whose error is the flat-road /
+  level-camera assumption alone (road grade, camber, ego pitch; the box is the true tight box);
+- the median height of the box bottom below the horizon (v - cy, px) and the sensitivity dZ/dv =
+  Z^2 / (fy H) (m per px) at the bin's median distance: a tracker jitter of one pixel in the bottom edge
+  moves the far ground point by that much, and the backward difference multiplies it by the frame rate;
+- the median distance the box bottom truly moves over the clip, fy H |v_z| (T - 1) / fps / Z^2 (px): what
+  any box-based estimator has to resolve.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from redsup.velocity.data import TrackSet
+from redsup.velocity.geometry import box_ground_point, bottom_centre, geometric_velocity
+from redsup.velocity.metrics import BIN_NAMES, tusimple_metrics
+from redsup.velocity.smoothing import gaussian_smooth
+
+VARIANTS = {"diff": (2, 0.0), "lsq10": (10, 0.0), "smooth5_diff": (2, 5.0)}
+
+
+def geometric_diagnosis(tracks: TrackSet, fps: float) -> dict[str, float]:
+    """Flat dict (see module doc): E_v_<variant>_<bin>, E_v_<variant>, E_p_<bin>, horizon_px_<bin>,
+    dz_per_px_<bin>, n_<bin>."""
+    out: dict[str, float] = {}
+    if len(tracks) == 0:
+        return out
+    calib = tracks.calib
+    for name, (window, sigma) in VARIANTS.items():
+        boxes = gaussian_smooth(tracks.boxes, sigma) if sigma > 0 else tracks.boxes
+        v = geometric_velocity(boxes, calib, fps, window)["velocity"]
+        m = tusimple_metrics(v, tracks.velocity, tracks.bins)
+        out[f"E_v_{name}"] = m["E_v"]
+        out.update({f"E_v_{name}_{b}": m[f"E_v_{b}"] for b in BIN_NAMES if f"E_v_{b}" in m})
+    X, Z, valid = box_ground_point(tracks.boxes[:, -1, :], calib)
+    p = np.stack([X, Z], axis=-1)
+    _, v_bottom = bottom_centre(tracks.boxes[:, -1, :])
+    for k, b in enumerate(BIN_NAMES):
+        sel = tracks.bins == k
+        out[f"n_{b}"] = int(sel.sum())
+        if not sel.any():
+            continue
+        ok = sel & valid
+        err = ((p[ok] - tracks.position[ok]) ** 2).sum(axis=1)
+        out[f"E_p_{b}"] = float(err.mean()) if ok.any() else float("nan")
+        out[f"horizon_px_{b}"] = float(np.median(v_bottom[sel] - calib.cy))
+        z_med = float(np.median(tracks.position[sel, 1]))
+        out[f"dz_per_px_{b}"] = z_med ** 2 / (calib.fy * calib.height)
+        # how far the box bottom moves over the clip for the true relative velocity: fy H |v_z| t / Z^2
+        span = (tracks.boxes.shape[1] - 1) / fps
+        z = tracks.position[sel, 1]
+        out[f"motion_px_{b}"] = float(np.median(calib.fy * calib.height * np.abs(tracks.velocity[sel, 1]) * span / z ** 2))
+    return out
+
+
+def diagnosis_note(metrics: dict, split: str = "test") -> str:
+    """One caption sentence with the per-bin numbers of `geometric_diagnosis` (keys `<split>_geo_*`)."""
+    def g(key):
+        v = metrics.get(f"{split}_geo_{key}")
+        return float("nan") if v is None else float(v)
+
+    def row(prefix):
+        return " / ".join(f"{g(f'{prefix}_{b}'):.3g}" for b in BIN_NAMES)
+
+    return (f"geometric baseline per bin (near / medium / far, {split}): E_v backward difference {row('E_v_diff')}, "
+            f"10-frame least squares {row('E_v_lsq10')}, backward difference of sigma-5-smoothed boxes "
+            f"{row('E_v_smooth5_diff')}; E_p of the annotated box (flat-road assumption only) {row('E_p')} m^2; "
+            f"box bottom {row('horizon_px')} px below the horizon, dZ/dv {row('dz_per_px')} m per px, "
+            f"true motion of the box bottom over the clip {row('motion_px')} px (medians)")
