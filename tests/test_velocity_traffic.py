@@ -78,8 +78,7 @@ def test_rendered_spread_grows_with_distance_like_tusimple(rendered):
     table = velocity_spread(rendered)
     assert table["n"].sum() >= 100 and (table["n"] >= 10).all()
     sz, sx = table["std v_z"], table["std v_x"]
-    assert sz["near"] < sz["medium"] < sz["far"] or sz["near"] < sz["far"]
-    assert sz["far"] > 1.2 * sz["near"]
+    assert sz["far"] > 1.2 * sz["near"]                     # the spread grows with distance
     for b, (ref_z, ref_x) in TUSIMPLE_STD.items():
         assert ref_z / 1.6 < sz[b] < ref_z * 1.6, (b, sz[b], ref_z)
         assert ref_x / 2.0 < sx[b] < ref_x * 2.0, (b, sx[b], ref_x)
