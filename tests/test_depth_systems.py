@@ -127,3 +127,18 @@ def test_train_settings_override_per_system():
     assert systems.input_size((64, 208), 0.5) == (32, 104)
     assert isinstance(systems.build({**model, "height": 1, "width": 1, "mode": "M"})["depth_encoder"],
                       networks.ResNetEncoder)
+
+
+def test_figures_draw_without_validation_history(tmp_path):
+    from redsup.depth import galteland_figures as gf
+
+    history = [{"step": s, "train_loss": 0.1 / s, "abs_rel": 0.3, "sq_rel": 2.0, "rmse": 7.0, "rmse_log": 0.5,
+                "a1": 0.3, "a2": 0.6, "a3": 0.8} for s in (2, 4)]
+    assert list(gf.epoch_table(history)["step"]) == [2, 4]
+    for runs in ([("a", history, 4)], [("a", [], 4)]):  # no val scenes: an annotated, empty figure
+        gf.progression(runs, "t").savefig(tmp_path / "f.png")
+        assert (tmp_path / "f.png").stat().st_size > 1000
+    assert gf.qualitative_frames(30, 3) == [1, 15, 29] and gf.qualitative_frames(1, 3) == [0]
+    specs = {"a": {"kind": "progression", "models": ["d/MD"]},
+             "b": {"kind": "qualitative", "models": ["d/MD"], "test": "e"}}
+    assert gf.available_figures(specs, ["d/MD"], {"e": 0}) == ["a"]

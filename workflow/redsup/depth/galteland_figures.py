@@ -65,7 +65,13 @@ def progression(runs: Sequence[tuple[str, Sequence[Mapping], int]], title: str):
         for ax in axes[1:]:
             ax.axvline(kept, color=f"C{k}", lw=0.8, alpha=0.6)
     axes[0].set(title="training loss (mean over the epoch)", xlabel="step")
-    axes[1].set(title="val errors (kept pass: vertical line)", xlabel="step", yscale="log")
+    axes[1].set(title="val errors (kept pass: vertical line)", xlabel="step")
+    if any(np.nanmax(epoch_table(h)[m], initial=0.0) > 0 for _, h, _ in runs for m in ERROR_METRICS if len(h)):
+        axes[1].set_yscale("log")
+    if not any(len(h) for _, h, _ in runs):
+        for ax in axes:
+            ax.text(0.5, 0.5, "no validation passes\n(the dataset has no val scenes)", ha="center", va="center",
+                    transform=ax.transAxes, fontsize=8)
     axes[2].set(title="val accuracies", xlabel="step", ylim=(0, 1))
     for ax in axes:
         ax.legend(fontsize=6)
