@@ -335,7 +335,7 @@ def test_misspelled_world_key_is_named():
 
 def test_bad_arguments_are_named(cfg, tmp_path):
     with pytest.raises(ValueError, match="split"):
-        write_scene(cfg["world"], "d", "kitti_like", "val", 0, 1, tmp_path / "x")
+        write_scene(cfg["world"], "d", "kitti_like", "validation", 0, 1, tmp_path / "x")
     with pytest.raises(ValueError, match="mars_like"):
         write_scene(cfg["world"], "d", "mars_like", "train", 0, 1, tmp_path / "x")
     assert not any(tmp_path.iterdir())
