@@ -571,10 +571,12 @@ class LiveSync:
         return (len(stats), max(stats, default=0))
 
     def _loop(self) -> None:
-        while not self._stop.wait(self.interval_s):
+        first = True  # sync at once: the store, its experiments and parents exist before the first job ends
+        while first or not self._stop.wait(self.interval_s):
             state = self._state()
-            if state == self._seen:
+            if state == self._seen and not first:
                 continue
+            first = False
             try:
                 self._sync()
                 self._seen = state
