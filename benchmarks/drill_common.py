@@ -11,9 +11,11 @@ otherwise win). Run them niced in a clean clone while other work edits the tree:
 """
 from __future__ import annotations
 
+import csv
 import hashlib
 import json
 import os
+import re
 import signal
 import sqlite3
 import subprocess
@@ -154,17 +156,42 @@ def digests(folder: Path, pattern: str = "*.csv") -> dict[str, str]:
             for p in sorted(folder.rglob(pattern)) if p.is_file()}
 
 
+TIMING_COLUMN = re.compile(r"runtime|second|\(ms\)|\(s\)|time|fps|per s\b", re.IGNORECASE)
+
+
+def differing_cells(a: Path, b: Path) -> list[tuple[int, str]] | None:
+    """(row, column header) of every cell that differs between two CSVs; None when their shapes differ."""
+    with open(a, newline="") as fa, open(b, newline="") as fb:
+        ra, rb = list(csv.reader(fa)), list(csv.reader(fb))
+    if len(ra) != len(rb) or not ra or any(len(x) != len(y) for x, y in zip(ra, rb)) or ra[0] != rb[0]:
+        return None
+    return [(i, ra[0][j]) for i in range(1, len(ra)) for j in range(len(ra[i])) if ra[i][j] != rb[i][j]]
+
+
 def compare_tables(reference: Path, other: Path) -> dict:
-    """Byte comparison of every CSV under results/tables/ (and, for information, every other file there)."""
+    """Byte comparison of every CSV under results/tables/ (and, for information, every other file there).
+
+    A CSV whose only differing cells are in measured-time columns (runtime, seconds per image: wall clock,
+    never reproducible) is listed under `csv_timing_only`, not `csv_differ`."""
     a, b = digests(reference / "results" / "tables"), digests(other / "results" / "tables")
-    differ = sorted(k for k in set(a) & set(b) if a[k] != b[k])
+    differ, timing_only = [], {}
+    for k in sorted(k for k in set(a) & set(b) if a[k] != b[k]):
+        cells = differing_cells(reference / "results" / "tables" / k, other / "results" / "tables" / k)
+        if cells is not None and cells and all(TIMING_COLUMN.search(col) for _, col in cells):
+            timing_only[k] = sorted({col for _, col in cells})
+        else:
+            differ.append(k)
     everything_a = digests(reference / "results" / "tables", "*")
     everything_b = digests(other / "results" / "tables", "*")
     other_differ = sorted(k for k in set(everything_a) & set(everything_b)
                           if everything_a[k] != everything_b[k] and not k.endswith(".csv"))
-    return {"csv_compared": len(set(a) & set(b)), "csv_identical": len(set(a) & set(b)) - len(differ),
-            "csv_differ": differ, "csv_missing": sorted(set(a) - set(b)), "csv_extra": sorted(set(b) - set(a)),
+    return {"csv_compared": len(set(a) & set(b)),
+            "csv_identical": len(set(a) & set(b)) - len(differ) - len(timing_only),
+            "csv_differ": differ, "csv_timing_only": timing_only, "csv_missing": sorted(set(a) - set(b)), "csv_extra": sorted(set(b) - set(a)),
             "other_files_differ": other_differ}
+
+
+ACTIVE = "(select run_uuid from runs where lifecycle_stage = 'active')"  # soft-deleted runs left out
 
 
 def store_summary(workdir: Path) -> dict:
@@ -183,8 +210,8 @@ def store_summary(workdir: Path) -> dict:
             "experiments": con.execute("select count(*) from experiments where lifecycle_stage='active'")
                               .fetchone()[0],
             "runs": con.execute("select count(*) from runs where lifecycle_stage='active'").fetchone()[0],
-            "metrics": con.execute("select count(*) from metrics").fetchone()[0],
-            "params": con.execute("select count(*) from params").fetchone()[0],
+            "metrics": con.execute(f"select count(*) from metrics where run_uuid in {ACTIVE}").fetchone()[0],
+            "params": con.execute(f"select count(*) from params where run_uuid in {ACTIVE}").fetchone()[0],
         }
     finally:
         con.close()

@@ -10,7 +10,8 @@
    next rerun is killed at the next moment, the last one runs to the end. A rerun that Snakemake refuses
    because of the killed run's stale lock is retried after `snakemake --unlock` (reported).
 3. Checks: the last rerun finishes (rc 0) and a dry run then has nothing to do; every CSV under
-   results/tables/ is byte-identical to the reference's; no MLflow run is RUNNING; every (experiment,
+   results/tables/ is byte-identical to the reference's (a table whose only differing cells are measured
+   wall-clock times, runtime / seconds per image, is reported apart: no two runs repeat those); no MLflow run is RUNNING; every (experiment,
    run name) of the reference store has as many runs (none lost) and no more (none duplicated); no `*.part`
    file of an atomic write is left under results/.
 
@@ -111,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
     report["failures"] = failures
     dc.write_report(base / "drill_kill_resume.json", report)
     print(f"kills survived {report['kills_survived']}/{args.kills} (moments {moments} s); "
-          f"CSV identical {t['csv_identical']}/{t['csv_compared']}; runs lost {s['runs_lost']}, duplicated "
+          f"CSV identical {t['csv_identical']}/{t['csv_compared']} (differing only in measured-time columns: {len(t['csv_timing_only'])}); runs lost {s['runs_lost']}, duplicated "
           f"{s['runs_duplicated']}, RUNNING {s['running_left']}; partial files {len(report['partial_files'])}")
     for f in failures:
         print("FAIL:", f, file=sys.stderr)
