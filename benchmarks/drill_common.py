@@ -236,6 +236,17 @@ def partial_files(workdir: Path) -> list[str]:
     return sorted(str(p.relative_to(workdir)) for p in (workdir / "results").rglob("*.part"))
 
 
+def comparison_failures(tables: dict, store: dict) -> list[str]:
+    """What a drill fails on in its comparison with the reference: differing / missing / extra table CSVs
+    (none compared counts as a failure), and MLflow runs left RUNNING, lost or duplicated."""
+    failures = []
+    if tables["csv_differ"] or tables["csv_missing"] or tables["csv_extra"] or not tables["csv_compared"]:
+        failures.append(f"tables differ from the reference: {tables}")
+    if store["running_left"] or store["runs_lost"] or store["runs_duplicated"]:
+        failures.append(f"MLflow store: {store}")
+    return failures
+
+
 def write_report(path: Path, report: dict) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(report, indent=2, sort_keys=True, default=str) + "\n")

@@ -101,12 +101,8 @@ def main(argv: list[str] | None = None) -> int:
         failures.append(f"the final rerun failed:\n{final['tail']}")
     if not report["dry_run_after"]["nothing_to_do"]:
         failures.append("a dry run after the drill still has jobs to do")
-    t = report["tables"]
-    if t["csv_differ"] or t["csv_missing"] or t["csv_extra"] or not t["csv_compared"]:
-        failures.append(f"tables differ from the reference: {t}")
-    s = report["store"]
-    if s["running_left"] or s["runs_lost"] or s["runs_duplicated"]:
-        failures.append(f"MLflow store: {s}")
+    t, s = report["tables"], report["store"]
+    failures += dc.comparison_failures(t, s)
     if report["partial_files"]:
         failures.append(f"partial files left: {report['partial_files']}")
     report["failures"] = failures

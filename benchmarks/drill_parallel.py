@@ -63,10 +63,7 @@ def main(argv: list[str] | None = None) -> int:
     ref_store, par_store = dc.store_summary(reference), dc.store_summary(parallel)
     report["store"] = s = dc.compare_stores(ref_store, par_store)
     report["counts"] = {k: [ref_store.get(k), par_store.get(k)] for k in ("experiments", "runs", "records")}
-    if t["csv_differ"] or t["csv_missing"] or t["csv_extra"] or not t["csv_compared"]:
-        failures.append(f"tables differ: {t}")
-    if s["running_left"] or s["runs_lost"] or s["runs_duplicated"]:
-        failures.append(f"MLflow store: {s}")
+    failures += dc.comparison_failures(t, s)
     for key, (a, b) in report["counts"].items():
         if a != b:
             failures.append(f"{key}: {a} with --cores 2, {b} with --cores {args.cores}")
