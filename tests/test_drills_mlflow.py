@@ -131,9 +131,6 @@ def _sync(workdir):
 
 
 @pytest.mark.workflow
-@pytest.mark.xfail(strict=True, reason="defect found by this drill (2026-12-02): the rebuilt store lacks the "
-                   "artifact galteland_fig4_6.png of parent run galteland_fig4_6 (experiment redsup/data) that the "
-                   "live sync attached; experiments, runs, params and metrics rebuild identically")
 def test_deleted_store_is_rebuilt_from_the_records_and_a_second_import_adds_nothing(tiny, tmp_path):
     work = _copy_build(tiny, tmp_path / "w")
     db = work / "results" / "mlflow.db"
