@@ -64,7 +64,11 @@ def test_every_child_has_its_job_time_and_memory(store):
     assert not missing
     assert all(r.data.metrics["job_wall_s"] > 0 for r in children)
     with_rss = [r for r in children if "job_max_rss_mb" in r.data.metrics]
-    assert len(with_rss) > len(children) // 2 and all(20 < r.data.metrics["job_max_rss_mb"] < 8000 for r in with_rss)
+    assert len(with_rss) > len(children) // 2
+    rss = sorted(r.data.metrics["job_max_rss_mb"] for r in with_rss)
+    # Snakemake samples memory about once a second: a 1 s job may be caught before Python has grown (7 MB
+    # seen), so the bound is on every value being positive and plausible, and on the median being a Python job's
+    assert all(0 < v < 8000 for v in rss) and rss[len(rss) // 2] > 20
 
 
 def test_every_table_filter_returns_exactly_its_rows_runs(built, store):
