@@ -247,6 +247,16 @@ def comparison_failures(tables: dict, store: dict) -> list[str]:
     return failures
 
 
+def finish(path: Path, report: dict, failures: list[str], summary: str) -> int:
+    """Write the drill's report (with its failures), print the one-line summary and each failure; exit code."""
+    report["failures"] = failures
+    write_report(path, report)
+    print(summary)
+    for f in failures:
+        print("FAIL:", f, file=sys.stderr)
+    return 1 if failures else 0
+
+
 def write_report(path: Path, report: dict) -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     path.write_text(json.dumps(report, indent=2, sort_keys=True, default=str) + "\n")

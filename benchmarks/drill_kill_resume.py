@@ -105,14 +105,9 @@ def main(argv: list[str] | None = None) -> int:
     failures += dc.comparison_failures(t, s)
     if report["partial_files"]:
         failures.append(f"partial files left: {report['partial_files']}")
-    report["failures"] = failures
-    dc.write_report(base / "drill_kill_resume.json", report)
-    print(f"kills survived {report['kills_survived']}/{args.kills} (moments {moments} s); "
+    return dc.finish(base / "drill_kill_resume.json", report, failures, f"kills survived {report['kills_survived']}/{args.kills} (moments {moments} s); "
           f"CSV identical {t['csv_identical']}/{t['csv_compared']} (differing only in measured-time columns: {len(t['csv_timing_only'])}); runs lost {s['runs_lost']}, duplicated "
           f"{s['runs_duplicated']}, RUNNING {s['running_left']}; partial files {len(report['partial_files'])}")
-    for f in failures:
-        print("FAIL:", f, file=sys.stderr)
-    return 1 if failures else 0
 
 
 if __name__ == "__main__":

@@ -67,14 +67,9 @@ def main(argv: list[str] | None = None) -> int:
     for key, (a, b) in report["counts"].items():
         if a != b:
             failures.append(f"{key}: {a} with --cores 2, {b} with --cores {args.cores}")
-    report["failures"] = failures
-    dc.write_report(base / "drill_parallel.json", report)
-    print(f"--cores {args.cores} vs 2: CSV identical {t['csv_identical']}/{t['csv_compared']} (differing only in measured-time columns: {len(t['csv_timing_only'])}); experiments, runs, "
+    return dc.finish(base / "drill_parallel.json", report, failures, f"--cores {args.cores} vs 2: CSV identical {t['csv_identical']}/{t['csv_compared']} (differing only in measured-time columns: {len(t['csv_timing_only'])}); experiments, runs, "
           f"records {report['counts']}; runs lost {s['runs_lost']}, duplicated {s['runs_duplicated']}, "
           f"RUNNING {s['running_left']}")
-    for f in failures:
-        print("FAIL:", f, file=sys.stderr)
-    return 1 if failures else 0
 
 
 if __name__ == "__main__":
