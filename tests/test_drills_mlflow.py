@@ -131,10 +131,6 @@ def _sync(workdir):
 
 
 @pytest.mark.workflow
-@pytest.mark.xfail(strict=False, reason="known intermittent defect (2026-12-02), open: a rebuilt store sometimes "
-                   "lacks a few artifacts the live sync attached (seen: parent galteland_fig4_6's png; child "
-                   "sic10_5_w0/seed1's curves.png and bev_test_frame.png; one detections png); experiments, "
-                   "runs, params and metrics always rebuilt identically in the 3 runs seen")
 def test_deleted_store_is_rebuilt_from_the_records_and_a_second_import_adds_nothing(tiny, tmp_path):
     work = _copy_build(tiny, tmp_path / "w")
     db = work / "results" / "mlflow.db"

@@ -196,3 +196,33 @@ def test_provisional_record_names_its_attempt(tmp_path):
         run.log_metric("m", 1.0)
     final = json.loads((tmp_path / "r.json").read_text())
     assert final["status"] == "FINISHED" and final["job"] == provisional["job"] and len(final["job"]["uid"]) == 32
+
+
+def test_a_record_finishing_while_the_sync_reads_it_still_gets_its_artifacts(work, monkeypatch):
+    """The race a live sync meets: it reads a job's provisional record, the job ends (its process is gone, the
+    record is final) before the sync hashes it. Content and hash come from one read, so the next sync sees a
+    new record and attaches the final record's artifacts (a second read once gave the final hash to the
+    provisional content: FINISHED later, but without the figure)."""
+    gate = work["root"] / "go"
+    proc = _job(work, "d", gate)
+    real = tracking.table_memberships
+
+    def job_ends_meanwhile(records, runs_root):  # runs after the records were read, before they are imported
+        gate.write_text("go")
+        assert proc.wait(60) == 0
+        return real(records, runs_root)
+
+    monkeypatch.setattr(tracking, "table_memberships", job_ends_meanwhile)
+    try:
+        work["sync"]()
+    finally:
+        proc.kill()
+    [run] = _runs(work, "d")
+    assert run.info.status == "KILLED"  # provisional content, its process gone: what the sync could know then
+    monkeypatch.setattr(tracking, "table_memberships", real)
+    work["sync"]()
+    from mlflow.tracking import MlflowClient
+
+    [run] = _runs(work, "d")
+    assert run.info.status == "FINISHED"
+    assert "out.txt" in {a.path for a in MlflowClient(work["uri"]).list_artifacts(run.info.run_id)}

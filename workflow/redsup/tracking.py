@@ -182,8 +182,12 @@ def find_records(runs_root: str | Path) -> list[Path]:
     return sorted(p for p in root.rglob("*.json") if p.is_file()) if root.exists() else []
 
 
-def record_id(path: str | Path) -> str:
-    return hashlib.sha1(Path(path).read_bytes()).hexdigest()
+def read_record(path: str | Path) -> tuple[dict, str]:
+    """A run record's content and its hash, from one read of the file. A job rewrites its record when it ends;
+    hashing a second read could pair the provisional content with the final record's hash, and the run would
+    then never get the final record's artifacts (the hash says it is up to date)."""
+    raw = Path(path).read_bytes()
+    return json.loads(raw), hashlib.sha1(raw).hexdigest()
 
 
 TERMINAL = ("FINISHED", "FAILED", "KILLED")
@@ -453,11 +457,13 @@ def _sync_records(tracking_uri, plan, runs_root: Path, out_json, *, artifact_roo
     from redsup.benchmarks import benchmark_path, job_metrics
 
     records = []
+    rids: dict[Path, str] = {}
     unreadable = []
     for path in find_records(runs_root):
         try:
-            records.append((path, json.loads(path.read_text())))
-        except (json.JSONDecodeError, OSError) as exc:  # a record being replaced is never half-written (.part)
+            data, rids[path] = read_record(path)
+            records.append((path, data))
+        except (json.JSONDecodeError, UnicodeDecodeError, OSError) as exc:  # never half-written (.part + rename)
             unreadable.append(f"{path}: {exc}")
     plan = {"stages": dict(plan.get("stages") or {}), "parents": list(plan.get("parents") or [])}
     known = {p["name"] for p in plan["parents"]}
@@ -477,7 +483,7 @@ def _sync_records(tracking_uri, plan, runs_root: Path, out_json, *, artifact_roo
     imported = updated = deleted = 0
     current: dict[str, str] = {}   # job key -> record path
     for path, data in records:
-        rid = record_id(path)
+        rid = rids[path]
         key = _job_key(data, rid)
         try:
             rel = str(path.relative_to(results_root.parent)) if path.is_absolute() else str(path)
