@@ -6,7 +6,6 @@ import json
 import os
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import textwrap
@@ -18,6 +17,7 @@ import pytest
 
 pytest.importorskip("mlflow")
 
+from conftest import mlflow_server  # noqa: E402
 from redsup import runlog, tracking  # noqa: E402
 
 WORKFLOW_DIR = Path(tracking.__file__).resolve().parents[1]
@@ -251,12 +251,6 @@ def test_plan_validation(tmp_path):
 
 
 # ------------------------------------------------------------------------------- server (REST)
-def _free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
 def _mlflow_cli() -> str | None:
     beside = Path(sys.executable).with_name("mlflow")
     return str(beside) if beside.exists() else shutil.which("mlflow")
@@ -278,29 +272,7 @@ def test_mlflow_server_rest_api(store, tmp_path):
     cli = _mlflow_cli()
     if cli is None:
         pytest.skip("the mlflow command-line tool is not installed")
-    port = _free_port()
-    base = f"http://127.0.0.1:{port}"
-    log = (tmp_path / "server.log").open("w")
-    proc = subprocess.Popen(
-        [cli, "server", "--backend-store-uri", store["uri"], "--host", "127.0.0.1", "--port", str(port),
-         "--workers", "1", "--default-artifact-root", str(tmp_path / "server-artifacts")],
-        cwd=tmp_path, env={**os.environ, **QUIET_ENV}, stdout=log, stderr=subprocess.STDOUT,
-        start_new_session=True)  # own process group: the server forks a uvicorn worker
-    try:
-        deadline = time.monotonic() + 120
-        while True:
-            if proc.poll() is not None:
-                raise AssertionError(f"mlflow server exited:\n{(tmp_path / 'server.log').read_text()}")
-            try:
-                with urllib.request.urlopen(f"{base}/health", timeout=2) as resp:
-                    if resp.status == 200:
-                        break
-            except OSError:
-                pass
-            if time.monotonic() > deadline:
-                raise AssertionError(f"mlflow server not up in 120 s:\n{(tmp_path / 'server.log').read_text()}")
-            time.sleep(0.5)
-
+    with mlflow_server(store["uri"], tmp_path, cli=[cli], env=QUIET_ENV) as base:
         exps = _get(f"{base}/api/2.0/mlflow/experiments/search?max_results=100")["experiments"]
         by_name = {e["name"]: e["experiment_id"] for e in exps}
         assert {f"redsup/{s}" for s in PLAN["stages"]} <= set(by_name)
@@ -320,12 +292,3 @@ def test_mlflow_server_rest_api(store, tmp_path):
         assert len(children) == 3
         params = {p["key"]: p["value"] for p in by_id[ok_id]["data"].get("params", [])}
         assert params["lr"] == "0.1"
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGTERM)
-            try:
-                proc.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait()
-        log.close()
