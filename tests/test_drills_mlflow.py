@@ -4,7 +4,8 @@
   (`redsup.runlog.child_run` records, imported by `redsup.tracking.sync_records`).
 * On a copy of the session's tiny build (conftest.built): deleting results/mlflow.db and running
   `python -m redsup.tracking` rebuilds the same experiments, runs (by experiment, name and status), params,
-  metrics and artifacts (listed through the MLflow client); importing the records again adds nothing.
+  metrics, artifacts (listed through the MLflow client) and logged models; importing the records again adds
+  nothing.
 * Two syncs at the same moment on a fresh store (two Snakemake invocations in one directory finishing
   together, each running its end-of-run sync) import every record exactly once.
 """
@@ -93,7 +94,8 @@ def _copy_build(built, dst):
 
 def store_contents(db) -> dict:
     """What a user sees in the store: experiments; runs by (experiment, run name, status); per run name
-    the params, metric values (with steps) and artifact files (through the MLflow client)."""
+    the params, metric values (with steps) and artifact files (through the MLflow client); logged models by
+    (experiment, run name, model name, status)."""
     from mlflow.tracking import MlflowClient
 
     con = sqlite3.connect(f"file:{db}?mode=ro", uri=True)
@@ -105,6 +107,10 @@ def store_contents(db) -> dict:
         active = "(select run_uuid from runs where lifecycle_stage = 'active')"
         params = con.execute(f"select count(*) from params where run_uuid in {active}").fetchone()[0]
         metrics = con.execute(f"select count(*) from metrics where run_uuid in {active}").fetchone()[0]
+        models = Counter(con.execute(
+            "select e.name, r.name, m.name, m.status from logged_models m join runs r on r.run_uuid = m.source_run_id "
+            "join experiments e on e.experiment_id = m.experiment_id "
+            "where m.lifecycle_stage = 'active' and r.lifecycle_stage = 'active'").fetchall())
     finally:
         con.close()
     client = MlflowClient(tracking_uri=f"sqlite:///{db}")
@@ -120,7 +126,7 @@ def store_contents(db) -> dict:
         for f in files(run_id):
             artifacts[(exp, name, f)] += 1
     return {"experiments": experiments, "runs": Counter((e, n, s) for _, e, n, s in rows),
-            "params": params, "metrics": metrics, "artifacts": artifacts}
+            "params": params, "metrics": metrics, "artifacts": artifacts, "models": models}
 
 
 def _sync(workdir):
@@ -143,7 +149,7 @@ def test_deleted_store_is_rebuilt_from_the_records_and_a_second_import_adds_noth
     out = _sync(work)
     assert f"{n_records} new runs of {n_records} records" in out, out
     rebuilt = store_contents(db)
-    for key in ("experiments", "runs", "params", "metrics", "artifacts"):
+    for key in ("experiments", "runs", "params", "metrics", "artifacts", "models"):
         assert rebuilt[key] == before[key], key
     out = _sync(work)                                   # the same records imported twice
     assert f"0 new runs of {n_records} records" in out, out

@@ -144,6 +144,35 @@ class RunRecord:
         self._stash(name).write_text(text)
         self.data["artifacts"].append([str(self._stash(name)), None])
 
+    # models ----------------------------------------------------------------------------------
+    def log_model(self, module, checkpoint: str | Path, name: str) -> str:
+        """The trained ``module`` of the checkpoint just written at ``checkpoint`` (`redsup.checkpoint.save`) as
+        an MLflow model: an MLflow model directory (``mlflow.pytorch`` flavour, the resolved config as
+        ``extra_files/config.yaml``) written now into this record's artifact folder (``models/<name>``), and an
+        entry in the record's ``models`` that the sync turns into a logged model of this run (params: the
+        checkpoint's meta; tags: kind, checkpoint path, config hash). ``name`` loses the characters MLflow
+        forbids in model names. Imports mlflow (about 1.5 s): for training jobs. A failure is printed and tagged
+        (``redsup.model_error``), never raised: the checkpoint, the job's result, is already written."""
+        name = "".join("-" if c in "/:.%\"'" else c for c in str(name))
+        folder = self.artifact_dir / "models" / name
+        try:
+            from redsup.checkpoint import save_mlflow_model
+
+            info = save_mlflow_model(module, folder, checkpoint, extra_files=[self.artifact_dir / "config.yaml"],
+                                     metadata={"config_hash": self.data["tags"].get("redsup.config_hash")})
+        except Exception as exc:  # noqa: BLE001
+            print(f"run record: model {name} not saved for MLflow ({type(exc).__name__}: {exc})", file=sys.stderr)
+            self.data["tags"]["redsup.model_error"] = f"{name}: {type(exc).__name__}: {exc}"[:5000]
+            return name
+        tags = {k: v for k, v in self.data["tags"].items()
+                if k in ("redsup.config_hash", "redsup.git_commit", "redsup.profile", "redsup.rule")}
+        entry = {"name": name, "path": str(folder), "checkpoint": str(checkpoint), "kind": info["kind"],
+                 "params": flatten_params(info["meta"]),
+                 "tags": {**tags, "redsup.kind": info["kind"], "redsup.checkpoint": str(checkpoint)}}
+        models = self.data.setdefault("models", [])
+        models[:] = [m for m in models if m["name"] != name] + [entry]
+        return name
+
     # persistence -----------------------------------------------------------------------------
     def write(self) -> None:
         tmp = self.path.with_name(self.path.name + ".part")
@@ -242,7 +271,7 @@ def child_run(record_path: str | Path, parent: str, run_name: str, *, rule: str,
     data = {
         "parent": parent, "run_name": run_name, "status": "RUNNING", "start_time": _now_ms(),
         "job": {"uid": uuid.uuid4().hex, "pid": os.getpid(), "host": socket.gethostname()},
-        "end_time": None, "params": {}, "metrics": [], "artifacts": [], "parent_artifacts": [],
+        "end_time": None, "params": {}, "metrics": [], "artifacts": [], "parent_artifacts": [], "models": [],
         "tags": {"redsup.rule": rule, "redsup.wildcards": json.dumps(wildcards, sort_keys=True),
                  "redsup.config_hash": config_hash(plain(config)), "redsup.git_commit": git_commit(),
                  "redsup.profile": str(config.get("profile", "unknown")),

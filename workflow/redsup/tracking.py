@@ -257,7 +257,7 @@ def _import_record(client, data: dict, rid: str, experiment_id: str, parent_id: 
     for i in range(0, len(metrics), 1000):
         _retry(client.log_batch, run_id, metrics=metrics[i:i + 1000])
     if status != "RUNNING":
-        _finish(client, run_id, parent_id, data, status)
+        _finish(client, run_id, parent_id, data, status, experiment_id)
     return run_id
 
 
@@ -272,12 +272,46 @@ def _log_datasets(client, run_id: str, datasets: list[Mapping[str, Any]]) -> Non
         _retry(client.log_inputs, run_id, datasets=inputs)
 
 
-def _finish(client, run_id: str, parent_id: str, data: Mapping[str, Any], status: str) -> None:
+def _log_models(client, run_id: str, experiment_id: str, models: list[Mapping[str, Any]]) -> int:
+    """Each model of a record (`RunRecord.log_model`: an MLflow model directory) as an MLflow logged model of the
+    run: created with the run as its source (found again by run and name: never twice), its directory uploaded,
+    READY, and linked as the run's output (the run's Models column and Logged models tab). Returns how many
+    were created."""
+    from mlflow.entities import LoggedModelOutput, LoggedModelStatus
+
+    if not models:
+        return 0
+    found = {m.name: m for m in _retry(client.search_logged_models, [experiment_id],
+                                      filter_string=f"source_run_id = '{run_id}'", max_results=1000)}
+    run = _retry(client.get_run, run_id)
+    linked = {o.model_id for o in (run.outputs.model_outputs if run.outputs else [])}
+    created = 0
+    for entry in models:
+        folder = Path(entry["path"])
+        if not (folder / "MLmodel").is_file():
+            print(f"mlflow sync: model {folder} no longer exists, skipped", file=sys.stderr)
+            continue
+        model = found.get(entry["name"])
+        if model is None:
+            model = _retry(client.create_logged_model, experiment_id, name=entry["name"], source_run_id=run_id,
+                           tags=dict(entry.get("tags") or {}), params=dict(entry.get("params") or {}),
+                           model_type=entry.get("kind"))
+            created += 1
+        if model.status != LoggedModelStatus.READY:   # new, or an upload a crash interrupted
+            _retry(client.log_model_artifacts, model.model_id, str(folder))
+            _retry(client.finalize_logged_model, model.model_id, LoggedModelStatus.READY)
+        if model.model_id not in linked:
+            _retry(client.log_outputs, run_id, [LoggedModelOutput(model.model_id, 0)])
+    return created
+
+
+def _finish(client, run_id: str, parent_id: str, data: Mapping[str, Any], status: str, experiment_id: str) -> None:
     _log_datasets(client, run_id, data.get("datasets") or [])
     for path, artifact_path in data["artifacts"]:
         _log_path(client, run_id, path, artifact_path)
     for path, artifact_path in data.get("parent_artifacts", []):
         _log_path(client, parent_id, path, artifact_path)
+    _log_models(client, run_id, experiment_id, data.get("models") or [])
     _retry(client.set_terminated, run_id, status, end_time=data.get("end_time") or _now_ms())
 
 
@@ -306,7 +340,7 @@ def _update_record(client, run, data: dict, rid: str, parent_id: str, status: st
         _retry(client.set_tag, run_id, key, value)
     if status != "RUNNING":
         if run.info.status == "RUNNING" or tags.get(TAG_RECORD_ID) != rid:
-            _finish(client, run_id, parent_id, data, status)
+            _finish(client, run_id, parent_id, data, status, run.info.experiment_id)
         elif run.info.status != status:
             _retry(client.set_terminated, run_id, status, end_time=data.get("end_time") or _now_ms())
 

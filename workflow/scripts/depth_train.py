@@ -82,5 +82,6 @@ with child_run(sm.log.run, parent, f"train {sm.wildcards.model}", rule=sm.rule, 
         meta.update(stereo_baseline=cfg["train"]["stereo_baseline"],
                     stereo_scale_factor=metric / cfg["train"]["stereo_baseline"])
     checkpoint.save(sm.output[0], models, meta, sm.config)
+    run.log_model(models, sm.output[0], name=f"depth-{sm.wildcards.model}")   # the system's networks, for MLflow
     run.log_metrics({k: float(v) for k, v in summary.items() if isinstance(v, (int, float))})
     print({k: v for k, v in summary.items() if k != "validation"})

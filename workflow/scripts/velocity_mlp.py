@@ -45,6 +45,7 @@ with child_run(sm.log.run, plan.parent(sm.config, configuration["name"]), sm.wil
     save_model(model, sm.output.model, sm.config, {"configuration": configuration, "seed": seed,
                                                    "smoothing": vcfg["smoothing"][configuration["train_on"]],
                                                    "calibration": train.calib.as_dict()})
+    run.log_model(model, sm.output.model, name=f"velocity_mlp-{sm.wildcards.run}")
     write_configuration_outputs(configuration, metrics, predictions, splits, sm.output.metrics, sm.output.predictions)
     run.log_metrics(metrics)
     print(metrics)

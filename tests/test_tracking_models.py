@@ -1,0 +1,123 @@
+"""Trained networks as MLflow models (issue 15): a training job's `RunRecord.log_model` writes an MLflow model
+directory of its checkpoint's network; the sync makes it a logged model of the job's run, once, linked to the
+run, with the resolved config; `mlflow.pytorch.load_model("models:/<id>")` gives the trained network back. A
+rebuilt store (records only) gets the same models."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+pytest.importorskip("mlflow")
+torch = pytest.importorskip("torch")
+
+from redsup import runlog, tracking  # noqa: E402
+
+PLAN = {"stages": {"velocity": "ch. 3"}, "parents": [{"name": "mccraith_ch3_table1", "stage": "velocity"}]}
+CONFIG = {"profile": "tiny", "seed": 3, "velocity": {"mlp": {"hidden": 3}}}
+X = torch.linspace(-1.0, 1.0, 8).reshape(2, 4)   # the fixed input both networks see
+
+
+def _train_and_record(runs: Path, results: Path):
+    """The velocity script's path: train a tiny VelocityMLP, `save_model` (redsup.checkpoint), `log_model`."""
+    from redsup.velocity.mlp import VelocityMLP, save_model
+
+    torch.manual_seed(0)
+    model = VelocityMLP(in_dim=4, hidden=3, layers=1, dropout=0.0)
+    model.set_normalisation(torch.randn(16, 4).numpy())
+    opt = torch.optim.SGD(model.parameters(), lr=0.1)
+    x, y = torch.randn(16, 4), torch.randn(16, 2)
+    with runlog.child_run(runs / "velocity" / "mlp.json", "mccraith_ch3_table1", "mlp run.1", rule="velocity_mlp",
+                          wildcards={"run": "mlp"}, config=CONFIG) as run:
+        for step in range(5):
+            opt.zero_grad()
+            loss = ((model(x) - y) ** 2).mean()
+            loss.backward()
+            opt.step()
+            run.log_metric("loss", loss.item(), step=step)
+        ckpt = results / "velocity" / "models" / "mlp.pt"
+        save_model(model, ckpt, CONFIG, {"seed": 3})
+        name = run.log_model(model, ckpt, name="velocity_mlp/mlp run.1")
+    model.eval()
+    with torch.no_grad():
+        return name, model(X)
+
+
+@pytest.fixture(scope="module")
+def store(tmp_path_factory):
+    root = tmp_path_factory.mktemp("models")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.chdir(root)
+        mp.setenv("MLFLOW_DISABLE_TELEMETRY", "true")
+        uri = f"sqlite:///{root}/results/mlflow.db"
+        mp.setenv("MLFLOW_TRACKING_URI", uri)
+        runs = root / "results" / "runs"
+        name, expected = _train_and_record(runs, root / "results")
+
+        def sync():
+            return tracking.sync_records(uri, PLAN, runs, root / "results" / "mlflow" / "registry.json",
+                                         artifact_root=root / "results" / "mlartifacts")
+
+        first, second = sync(), sync()
+        yield {"root": root, "uri": uri, "runs": runs, "name": name, "expected": expected, "sync": sync,
+               "first": first, "second": second}
+
+
+def _models(uri, registry):
+    from mlflow.tracking import MlflowClient
+
+    client = MlflowClient(uri)
+    [run] = client.search_runs(list(registry["experiments"].values()), "tags.`redsup.role` = 'child'")
+    models = client.search_logged_models(list(registry["experiments"].values()))
+    return client, run, models
+
+
+def test_one_logged_model_linked_to_its_run(store):
+    assert (store["first"]["imported"], store["second"]["imported"], store["second"]["updated"]) == (1, 0, 0)
+    assert store["name"] == "velocity_mlp-mlp run-1"     # no '/', '.': MLflow model names forbid them
+    client, run, models = _models(store["uri"], store["second"])
+    assert len(models) == 1, [m.name for m in models]      # the second sync created none
+    [model] = models
+    assert model.name == store["name"] and model.source_run_id == run.info.run_id
+    assert str(model.status) in ("READY", "LoggedModelStatus.READY")
+    assert model.model_type == "velocity_mlp"
+    assert [o.model_id for o in run.outputs.model_outputs] == [model.model_id]   # the run's Models column
+    assert model.tags["redsup.config_hash"] == run.data.tags["redsup.config_hash"]
+    assert model.tags["redsup.checkpoint"].endswith("mlp.pt")
+    assert json.loads(model.params["network.hidden"]) == 3 and model.params["seed"] == "3"
+
+
+def test_loaded_model_computes_what_the_trained_one_did(store, monkeypatch):
+    import mlflow.pytorch
+    import yaml
+
+    monkeypatch.setenv("MLFLOW_ALLOW_PICKLE_DESERIALIZATION", "true")   # the flavour pickles the module
+    _, _, [model] = _models(store["uri"], store["second"])
+    (store["root"] / "dl").mkdir()
+    net = mlflow.pytorch.load_model(f"models:/{model.model_id}", dst_path=str(store["root"] / "dl"))
+    with torch.no_grad():
+        assert torch.equal(net(X), store["expected"])
+    from mlflow.tracking import MlflowClient
+
+    files = {a.path for a in MlflowClient(store["uri"]).list_logged_model_artifacts(model.model_id)}
+    assert {"MLmodel", "extra_files"} <= files, files
+    cfg = yaml.safe_load(next((store["root"] / "dl").rglob("config.yaml")).read_text())
+    assert cfg == CONFIG   # the resolved config travels with the model
+
+
+def test_rebuilt_store_gets_the_same_model(store):
+    """A fresh store from the same records (this process keeps a connection to the first store's file, so
+    the rebuild goes to a second file rather than the deleted first)."""
+    root = store["root"]
+    _, _, [before] = _models(store["uri"], store["second"])
+    uri = f"sqlite:///{root}/rebuilt/mlflow.db"
+    reg = tracking.sync_records(uri, PLAN, store["runs"], root / "rebuilt" / "registry.json",
+                                artifact_root=root / "rebuilt" / "mlartifacts")
+    assert reg["imported"] == 1
+    client, run, [after] = _models(uri, reg)
+    assert (after.name, after.params, after.tags, after.model_type) == (before.name, before.params, before.tags,
+                                                                        before.model_type)
+    assert after.source_run_id == run.info.run_id and after.model_id != before.model_id
+    assert {a.path for a in client.list_logged_model_artifacts(after.model_id)} == \
+        {a.path for a in client.list_logged_model_artifacts(before.model_id)}
