@@ -1,7 +1,7 @@
 """Trained networks as MLflow models (issue 15): a training job's `RunRecord.log_model` writes an MLflow model
 directory of its checkpoint's network; the sync makes it a logged model of the job's run, once, linked to the
 run, with the resolved config; `mlflow.pytorch.load_model("models:/<id>")` gives the trained network back. A
-rebuilt store (records only) gets the same models."""
+rebuilt store (records only) gets the same models. Parents span their children: first start to last end."""
 from __future__ import annotations
 
 import json
@@ -121,3 +121,43 @@ def test_rebuilt_store_gets_the_same_model(store):
     assert after.source_run_id == run.info.run_id and after.model_id != before.model_id
     assert {a.path for a in client.list_logged_model_artifacts(after.model_id)} == \
         {a.path for a in client.list_logged_model_artifacts(before.model_id)}
+
+
+# ----------------------------------------------------------------------------- parent durations
+def _record(path: Path, parent: str, name: str, start: int, end: int | None, status: str = "FINISHED"):
+    data = {"parent": parent, "run_name": name, "status": status, "start_time": start, "end_time": end,
+            "job": {"uid": name, "pid": 0, "host": "elsewhere"}, "params": {}, "metrics": [], "artifacts": [],
+            "parent_artifacts": [], "models": [], "tags": {"redsup.rule": "r"}}
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(data))
+
+
+def test_parent_spans_its_children(tmp_path):
+    """A parent starts with its first child and ends with its last finished child (the table job), in a fresh
+    store and as later children finish; a sync with nothing new writes nothing."""
+    from mlflow.tracking import MlflowClient
+
+    plan = {"stages": {"s": ""}, "parents": [{"name": "t1", "stage": "s"}, {"name": "t2", "stage": "s"}]}
+    runs, uri = tmp_path / "runs", f"sqlite:///{tmp_path}/m.db"
+
+    def sync():
+        return tracking.sync_records(uri, plan, runs, tmp_path / "reg.json", artifact_root=tmp_path / "art")
+
+    t0 = 1_700_000_000_000
+    _record(runs / "a.json", "t1", "a", t0 + 5_000, t0 + 65_000)
+    _record(runs / "b.json", "t1", "b", t0 + 1_000, t0 + 30_000)
+    _record(runs / "c.json", "t1", "c", t0 + 70_000, None, status="RUNNING")   # runs elsewhere: no end yet
+    reg = sync()
+    client = MlflowClient(uri)
+    parent = client.get_run(reg["parents"]["t1"]).info
+    assert (parent.start_time, parent.end_time, parent.status) == (t0 + 1_000, t0 + 65_000, "FINISHED")
+    empty = client.get_run(reg["parents"]["t2"]).info   # no child yet: no duration
+    assert empty.status == "FINISHED" and empty.end_time == empty.start_time
+    again = sync()
+    assert (again["imported"], again["updated"], again["parents_timed"]) == (0, 0, 0)
+    _record(runs / "c.json", "t1", "c", t0 + 70_000, t0 + 99_000)              # the table job ends
+    later = sync()
+    assert later["parents_timed"] == 1
+    parent = client.get_run(reg["parents"]["t1"]).info
+    assert (parent.start_time, parent.end_time) == (t0 + 1_000, t0 + 99_000)
+    assert sync()["parents_timed"] == 0

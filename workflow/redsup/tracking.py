@@ -11,7 +11,9 @@ preparation step, one child run per Snakemake job, imported from the jobs' run r
 * Tracking URI: `$MLFLOW_TRACKING_URI` if set, else `mlflow.tracking_uri` from the config, else
   `sqlite:///results/mlflow.db` (relative to the working directory). For a local store every experiment
   gets the artifact location `<mlflow.artifact_root>/<stage>` (default `results/mlartifacts/<stage>`).
-* Parent runs are created FINISHED; they group their children through the `mlflow.parentRunId` tag.
+* Parent runs are FINISHED; they group their children through the `mlflow.parentRunId` tag and span them: a
+  parent starts with its first child (when a record is known as it is created; else at its creation) and ends
+  with its last finished child (the table job), updated by every sync that sees a later end.
   Experiments are found by name, parents by their `redsup.parent` tag, children by `redsup.job_uid` (one
   attempt of one job) and updated in place as their record changes (`redsup.record_id`: the hash last
   imported), so syncing at any moment, any number of times, imports nothing twice. A re-run job (new
@@ -93,8 +95,12 @@ def _retry(fn, *args, **kwargs):
 # ------------------------------------------------------------------------------------ init_store
 def init_store(tracking_uri: str, plan: Mapping[str, Any], out_json: str | Path, *,
                artifact_root: str | Path = DEFAULT_ARTIFACT_ROOT,
-               experiment_prefix: str = DEFAULT_EXPERIMENT_PREFIX) -> dict:
+               experiment_prefix: str = DEFAULT_EXPERIMENT_PREFIX,
+               starts: Mapping[str, int] | None = None) -> dict:
     """Create (or find) one experiment per stage and one FINISHED parent run per entry of ``plan``.
+
+    A new parent starts at ``starts[name]`` (ms: its first child's start, when records are known) or now, and
+    ends when it starts: `sync_records` moves its end to its last finished child's (`_time_parents`).
 
     ``plan`` = ``{"stages": {stage: description}, "parents": [{"name", "stage", "description"?}]}``.
     Writes and returns ``{"tracking_uri", "experiments": {stage: id}, "parents": {name: run_id},
@@ -159,9 +165,11 @@ def init_store(tracking_uri: str, plan: Mapping[str, Any], out_json: str | Path,
         if run_id is None:
             tags = {TAG_ROLE: "parent", TAG_PARENT: name, TAG_STAGE: stage,
                     RUN_NOTE: p.get("description") or ""}
-            run = _retry(client.create_run, experiments[stage], run_name=name, tags=tags)
+            run = _retry(client.create_run, experiments[stage], run_name=name, tags=tags,
+                         start_time=(starts or {}).get(name) or _now_ms())
             run_id = run.info.run_id
-            _retry(client.set_terminated, run_id, RunStatus.to_string(RunStatus.FINISHED))
+            _retry(client.set_terminated, run_id, RunStatus.to_string(RunStatus.FINISHED),
+                   end_time=run.info.start_time)
         parent_ids[name] = run_id
         parent_stages[name] = stage
 
@@ -464,6 +472,25 @@ def _sync_parent_artifacts(client, registry: Mapping[str, Any], table_ids: list[
     return logged
 
 
+def _time_parents(client, registry: Mapping[str, Any], ends: Mapping[str, int]) -> int:
+    """Each parent ends with its last finished child (``ends``: parent name -> ms); written only when it moved.
+    Returns how many parents changed."""
+    if not ends or not registry["experiments"]:
+        return 0
+    parents = {r.info.run_id: r for r in _retry(client.search_runs, list(registry["experiments"].values()),
+                                                  filter_string=f"tags.`{TAG_ROLE}` = 'parent'", max_results=5000)}
+    changed = 0
+    for name, end in ends.items():
+        run = parents.get(registry["parents"].get(name))
+        if run is None:
+            continue
+        end = max(end, run.info.start_time)   # a parent made after its children (moved stage): no negative span
+        if run.info.end_time != end or run.info.status != "FINISHED":
+            _retry(client.set_terminated, run.info.run_id, "FINISHED", end_time=end)
+            changed += 1
+    return changed
+
+
 def sync_records(tracking_uri: str, plan: Mapping[str, Any], runs_root: str | Path, out_json: str | Path, *,
                  artifact_root: str | Path = DEFAULT_ARTIFACT_ROOT,
                  experiment_prefix: str = DEFAULT_EXPERIMENT_PREFIX, table_ids: list[str] | None = None,
@@ -504,8 +531,11 @@ def _sync_records(tracking_uri, plan, runs_root: Path, out_json, *, artifact_roo
     plan["stages"].setdefault("data", "Embedded world and data preparation")
     for name in sorted({data["parent"] for _, data in records} - known):
         plan["parents"].append({"name": name, "stage": "data"})
+    starts: dict[str, int] = {}
+    for _, data in records:
+        starts[data["parent"]] = min(starts.get(data["parent"], data["start_time"]), data["start_time"])
     registry = init_store(tracking_uri, plan, out_json, artifact_root=artifact_root,
-                          experiment_prefix=experiment_prefix)
+                          experiment_prefix=experiment_prefix, starts=starts)
     client = _client(tracking_uri)
     existing: dict[str, Any] = {}
     if registry["experiments"]:
@@ -560,8 +590,14 @@ def _sync_records(tracking_uri, plan, runs_root: Path, out_json, *, artifact_roo
             updated += 1
         updated += bool(_reconcile(client, run, {}, {}, 0))
     parents_logged = _sync_parent_artifacts(client, registry, list(table_ids or []), results_root)
+    ends: dict[str, int] = {}
+    for _, data in records:
+        if data.get("end_time") and record_status(data, final) in TERMINAL:
+            ends[data["parent"]] = max(ends.get(data["parent"], 0), int(data["end_time"]))
+    timed = _time_parents(client, registry, ends)
     registry.update({"imported": imported, "updated": updated, "deleted": deleted, "records": len(records),
-                     "unreadable": unreadable, "parents_with_new_artifacts": parents_logged})
+                     "unreadable": unreadable, "parents_with_new_artifacts": parents_logged,
+                     "parents_timed": timed})
     Path(out_json).write_text(json.dumps(registry, indent=2, sort_keys=True) + "\n")
     return registry
 
