@@ -22,7 +22,6 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 import torch.nn.functional as F
-from scipy.spatial import cKDTree
 
 
 @dataclass(frozen=True)
@@ -117,6 +116,8 @@ def build_template(spec: TemplateSpec = TemplateSpec(), workers: int = 1) -> Tem
     axes = [origin[k] + spec.voxel * np.arange(n[k]) for k in range(3)]
     zz, yy, xx = np.meshgrid(axes[2], axes[1], axes[0], indexing="ij")
     nodes = np.stack([xx.ravel(), yy.ravel(), zz.ravel()], axis=1)
+    from scipy.spatial import cKDTree  # ~1 s of import, needed only when a template grid is built
+
     dist, _ = cKDTree(pts).query(nodes, workers=workers)
     field = torch.from_numpy(dist.reshape(n[2], n[1], n[0]).astype(np.float32))
     return Template(spec, pts, field, origin, float(spec.voxel))

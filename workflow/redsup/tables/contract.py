@@ -18,10 +18,12 @@ from __future__ import annotations
 import importlib
 from dataclasses import dataclass, field
 from types import ModuleType
-
-import pandas as pd
+from typing import TYPE_CHECKING
 
 from redsup.tables.registry import load_registry, table_info
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 
 @dataclass

@@ -10,9 +10,12 @@ import functools
 import math
 import re
 from pathlib import Path
+from typing import TYPE_CHECKING
 
-import pandas as pd
 import yaml
+
+if TYPE_CHECKING:  # pandas is imported where it is used: the stage plans read this module in every job
+    import pandas as pd
 
 DATA_DIR = Path(__file__).resolve().parents[1] / "data"
 REGISTRY_YAML = DATA_DIR / "tables.yaml"
@@ -55,6 +58,8 @@ def table_info(table_id: str, registry: dict | None = None) -> dict:
 
 @functools.lru_cache(maxsize=4)
 def _load_paper_values(path: str) -> pd.DataFrame:
+    import pandas as pd
+
     df = pd.read_csv(path, dtype=str, keep_default_na=False)
     if list(df.columns) != PAPER_COLUMNS:
         raise ValueError(f"{path}: columns must be {PAPER_COLUMNS}, got {list(df.columns)}")
@@ -137,6 +142,8 @@ def as_frame(ours) -> pd.DataFrame:
     Accepts a DataFrame indexed by row label, or one with a ``row`` column, or one whose first column
     holds text labels; a dict of dicts {row: {column: value}} works too.
     """
+    import pandas as pd
+
     if isinstance(ours, dict):
         ours = pd.DataFrame.from_dict(ours, orient="index")
     df = ours.copy()
@@ -165,4 +172,6 @@ def align(ours: pd.DataFrame, paper: pd.DataFrame) -> pd.DataFrame:
 
 def numeric(df: pd.DataFrame) -> pd.DataFrame:
     """Every column coerced to float (text cells become NaN)."""
+    import pandas as pd
+
     return df.apply(pd.to_numeric, errors="coerce").astype(float)
