@@ -226,3 +226,12 @@ def test_a_record_finishing_while_the_sync_reads_it_still_gets_its_artifacts(wor
     [run] = _runs(work, "d")
     assert run.info.status == "FINISHED"
     assert "out.txt" in {a.path for a in MlflowClient(work["uri"]).list_artifacts(run.info.run_id)}
+
+
+def test_live_sync_leaves_the_cores_to_the_jobs():
+    # by hand: a 4 s sync at a 10 % share waits 4 * 0.9 / 0.1 = 36 s; a 0.5 s sync waits the 10 s interval
+    assert tracking.live_wait(10.0, 4.0, 0.1) == pytest.approx(36.0)
+    assert tracking.live_wait(10.0, 0.5, 0.1) == 10.0
+    assert tracking.live_wait(10.0, 0.0, 0.1) == 10.0
+    # syncing then takes exactly the share of the time: 4 / (4 + 36) = 0.1
+    assert 4.0 / (4.0 + tracking.live_wait(10.0, 4.0, 0.1)) == pytest.approx(0.1)

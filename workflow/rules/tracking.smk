@@ -10,7 +10,8 @@ def start_live_tracking():
     interval = float(config["mlflow"].get("live_interval_s", 0))
     if interval > 0 and not _LIVE_SYNC:
         sync = _tracking.LiveSync(lambda: _tracking.sync_from_config(config),
-                                  ["results/runs", "results/benchmarks"], interval)
+                                  ["results/runs", "results/benchmarks"], interval,
+                                  share=float(config["mlflow"].get("live_share", 0.1)))
         _LIVE_SYNC.append(sync.start())
 
 
