@@ -1,4 +1,4 @@
-"""Trained networks as MLflow models (issue 15): a training job's `RunRecord.log_model` writes an MLflow model
+"""Trained networks as MLflow models (issue 15): a training job's `redsup.mlflow_model.log_model` writes an MLflow model
 directory of its checkpoint's network; the sync makes it a logged model of the job's run, once, linked to the
 run, with the resolved config; `mlflow.pytorch.load_model("models:/<id>")` gives the trained network back. A
 rebuilt store (records only) gets the same models. Parents span their children: first start to last end."""
@@ -13,6 +13,7 @@ pytest.importorskip("mlflow")
 torch = pytest.importorskip("torch")
 
 from redsup import runlog, tracking  # noqa: E402
+from redsup.mlflow_model import log_model  # noqa: E402
 
 PLAN = {"stages": {"velocity": "ch. 3"}, "parents": [{"name": "mccraith_ch3_table1", "stage": "velocity"}]}
 CONFIG = {"profile": "tiny", "seed": 3, "velocity": {"mlp": {"hidden": 3}}}
@@ -38,7 +39,7 @@ def _train_and_record(runs: Path, results: Path):
             run.log_metric("loss", loss.item(), step=step)
         ckpt = results / "velocity" / "models" / "mlp.pt"
         save_model(model, ckpt, CONFIG, {"seed": 3})
-        name = run.log_model(model, ckpt, name="velocity_mlp/mlp run.1")
+        name = log_model(run, model, ckpt, name="velocity_mlp/mlp run.1")
     model.eval()
     with torch.no_grad():
         return name, model(X)

@@ -7,14 +7,11 @@ A checkpoint is one ``torch.save`` dict::
      "meta": {what the stage needs to rebuild and use the networks: sizes, ranges, training summary}}
 
 ``save`` writes atomically (``<path>.part`` then rename: a failed job leaves nothing); ``load`` checks the
-format and kind and names the file in every error. ``save_mlflow_model`` writes the trained network of a checkpoint
-as an MLflow model directory (``RunRecord.log_model``), which the MLflow sync logs as a model of the job's run.
+format and kind and names the file in every error. `redsup.mlflow_model` makes a checkpoint's network an MLflow model.
 """
 from __future__ import annotations
 
-import copy
 import os
-import shutil
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -55,38 +52,3 @@ def load(path: str | Path, kind: str) -> dict:
         raise ValueError(f"{path}: a {data.get('kind')!r} checkpoint, expected {kind!r}")
     return data
 
-
-def save_mlflow_model(module: nn.Module, folder: str | Path, checkpoint_path: str | Path,
-                      extra_files: list[str | Path] = (), metadata: Mapping[str, Any] | None = None) -> dict:
-    """``module`` (the trained network of the checkpoint at ``checkpoint_path``) as an MLflow model directory in
-    ``folder`` (replaced): the ``mlflow.pytorch`` flavour of a CPU copy in eval mode, pickled (the default
-    ``pt2`` format needs a traceable ``forward`` and an input example; a depth system is a ``ModuleDict``), with
-    ``extra_files`` (the resolved config) and explicit pip requirements (inferring them would load the model in
-    a subprocess). Returns the checkpoint's ``kind`` and ``meta``. Imports mlflow (about 1.5 s); writes files
-    only: no tracking store is opened."""
-    import logging
-    from importlib.metadata import version
-
-    os.environ.setdefault("MLFLOW_DISABLE_TELEMETRY", "true")   # a job talks to no server, telemetry's neither
-    import mlflow.pytorch
-
-    data = torch.load(checkpoint_path, map_location="cpu", weights_only=False)
-    if not isinstance(data, dict) or data.get("format") != FORMAT:
-        raise ValueError(f"{checkpoint_path}: not a {FORMAT} checkpoint")
-    folder = Path(folder)
-    if folder.exists():
-        shutil.rmtree(folder)
-    folder.parent.mkdir(parents=True, exist_ok=True)
-    net = copy.deepcopy(module).cpu().eval()
-    requirements = [f"torch=={torch.__version__.split('+')[0]}", f"cloudpickle=={version('cloudpickle')}"]
-    logger = logging.getLogger("mlflow.pytorch")
-    level = logger.level
-    logger.setLevel(logging.ERROR)   # its warning that pickles run code when loaded: see README, loading a model
-    try:
-        mlflow.pytorch.save_model(net, str(folder), serialization_format="pickle", pip_requirements=requirements,
-                                  extra_files=[str(f) for f in extra_files] or None,
-                                  metadata=plain({"redsup_kind": data["kind"], "checkpoint": str(checkpoint_path),
-                                                  **dict(metadata or {})}))
-    finally:
-        logger.setLevel(level)
-    return {"kind": data["kind"], "meta": data["meta"]}

@@ -145,34 +145,6 @@ class RunRecord:
         self.data["artifacts"].append([str(self._stash(name)), None])
 
     # models ----------------------------------------------------------------------------------
-    def log_model(self, module, checkpoint: str | Path, name: str) -> str:
-        """The trained ``module`` of the checkpoint just written at ``checkpoint`` (`redsup.checkpoint.save`) as
-        an MLflow model: an MLflow model directory (``mlflow.pytorch`` flavour, the resolved config as
-        ``extra_files/config.yaml``) written now into this record's artifact folder (``models/<name>``), and an
-        entry in the record's ``models`` that the sync turns into a logged model of this run (params: the
-        checkpoint's meta; tags: kind, checkpoint path, config hash). ``name`` loses the characters MLflow
-        forbids in model names. Imports mlflow (about 1.5 s): for training jobs. A failure is printed and tagged
-        (``redsup.model_error``), never raised: the checkpoint, the job's result, is already written."""
-        name = "".join("-" if c in "/:.%\"'" else c for c in str(name))
-        folder = self.artifact_dir / "models" / name
-        try:
-            from redsup.checkpoint import save_mlflow_model
-
-            info = save_mlflow_model(module, folder, checkpoint, extra_files=[self.artifact_dir / "config.yaml"],
-                                     metadata={"config_hash": self.data["tags"].get("redsup.config_hash")})
-        except Exception as exc:  # noqa: BLE001
-            print(f"run record: model {name} not saved for MLflow ({type(exc).__name__}: {exc})", file=sys.stderr)
-            self.data["tags"]["redsup.model_error"] = f"{name}: {type(exc).__name__}: {exc}"[:5000]
-            return name
-        tags = {k: v for k, v in self.data["tags"].items()
-                if k in ("redsup.config_hash", "redsup.git_commit", "redsup.profile", "redsup.rule")}
-        entry = {"name": name, "path": str(folder), "checkpoint": str(checkpoint), "kind": info["kind"],
-                 "params": flatten_params(info["meta"]),
-                 "tags": {**tags, "redsup.kind": info["kind"], "redsup.checkpoint": str(checkpoint)}}
-        models = self.data.setdefault("models", [])
-        models[:] = [m for m in models if m["name"] != name] + [entry]
-        return name
-
     # persistence -----------------------------------------------------------------------------
     def write(self) -> None:
         tmp = self.path.with_name(self.path.name + ".part")

@@ -281,7 +281,7 @@ def _log_datasets(client, run_id: str, datasets: list[Mapping[str, Any]]) -> Non
 
 
 def _log_models(client, run_id: str, experiment_id: str, models: list[Mapping[str, Any]]) -> int:
-    """Each model of a record (`RunRecord.log_model`: an MLflow model directory) as an MLflow logged model of the
+    """Each model of a record (`redsup.mlflow_model.log_model`: an MLflow model directory) as an MLflow logged model of the
     run: created with the run as its source (found again by run and name: never twice), its directory uploaded,
     READY, and linked as the run's output (the run's Models column and Logged models tab). Returns how many
     were created."""

@@ -13,6 +13,7 @@ from redsup.depth.configs import parse_model  # noqa: E402
 from redsup.depth.plan import model_parent  # noqa: E402
 from redsup.depth.experiments import loss_settings  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
+from redsup.mlflow_model import log_model  # noqa: E402
 
 sm = snakemake  # noqa: F821
 from redsup.determinism import configure as deterministic_torch  # noqa: E402
@@ -82,6 +83,6 @@ with child_run(sm.log.run, parent, f"train {sm.wildcards.model}", rule=sm.rule, 
         meta.update(stereo_baseline=cfg["train"]["stereo_baseline"],
                     stereo_scale_factor=metric / cfg["train"]["stereo_baseline"])
     checkpoint.save(sm.output[0], models, meta, sm.config)
-    run.log_model(models, sm.output[0], name=f"depth-{sm.wildcards.model}")   # the system's networks, for MLflow
+    log_model(run, models, sm.output[0], name=f"depth-{sm.wildcards.model}")   # the system's networks, for MLflow
     run.log_metrics({k: float(v) for k, v in summary.items() if isinstance(v, (int, float))})
     print({k: v for k, v in summary.items() if k != "validation"})

@@ -21,6 +21,7 @@ from redsup.lidar_detector.grid import GridSpec  # noqa: E402
 from redsup.lidar_detector.postprocess import InferSpec  # noqa: E402
 from redsup.lidar_detector.train import RunSpec, TrainSpec, train  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
+from redsup.mlflow_model import log_model  # noqa: E402
 
 sm = snakemake  # noqa: F821
 from redsup.determinism import configure as deterministic_torch  # noqa: E402
@@ -63,7 +64,7 @@ with child_run(sm.log.run, tables[0], name, rule=sm.rule, wildcards=dict(sm.wild
     checkpoint.save(sm.output.model, "lidar_detector", {"net": model}, sm.config,
                     {"configuration": conf, "seed": seed, "run": cfg["runs"][conf], "grid": cfg["grid"],
                      "network": cfg["network"], "yaw_bins": cfg["yaw_bins"], "summary": summary})
-    run.log_model(model, sm.output.model, name=f"lidar_detector-{name}")
+    log_model(run, model, sm.output.model, name=f"lidar_detector-{name}")
     counts = [len(d.score) for d in dets]
     save_npz_atomic(sm.output.detections, frame=np.repeat(np.arange(len(dets)), counts),
                     boxes=np.concatenate([d.boxes for d in dets]) if dets else np.zeros((0, 7)),

@@ -12,6 +12,7 @@ from redsup.fileio import write_text_atomic  # noqa: E402
 from redsup.lifting import plan  # noqa: E402
 from redsup.lifting.pipeline import run_configuration, save_model, scene_inputs  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
+from redsup.mlflow_model import log_model  # noqa: E402
 
 sm = snakemake  # noqa: F821
 from redsup.determinism import configure as deterministic_torch  # noqa: E402
@@ -34,7 +35,7 @@ with child_run(sm.log.run, tables[0], run_name, rule=sm.rule, wildcards=dict(sm.
     run.log_metrics(metrics)
     run.log_metrics(info)
     save_model(model, spec, sm.config, sm.output.model, {"configuration": conf, "seed": seed})
-    run.log_model(model, sm.output.model, name=f"lifting-{run_name}")
+    log_model(run, model, sm.output.model, name=f"lifting-{run_name}")
     write_text_atomic(sm.output.info, json.dumps(info, indent=1, sort_keys=True) + "\n")
     # the result the tables read: the KITTI metrics and the evaluation diagnostics
     result = metrics | {k: v for k, v in info.items() if k.startswith("diag/")}

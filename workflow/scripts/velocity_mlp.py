@@ -11,6 +11,7 @@ import torch  # noqa: E402
 
 from redsup.prep.seeds import derive_seed  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
+from redsup.mlflow_model import log_model  # noqa: E402
 from redsup.velocity import plan  # noqa: E402
 from redsup.velocity.data import load_split  # noqa: E402
 from redsup.velocity.experiment import run_mlp  # noqa: E402
@@ -45,7 +46,7 @@ with child_run(sm.log.run, plan.parent(sm.config, configuration["name"]), sm.wil
     save_model(model, sm.output.model, sm.config, {"configuration": configuration, "seed": seed,
                                                    "smoothing": vcfg["smoothing"][configuration["train_on"]],
                                                    "calibration": train.calib.as_dict()})
-    run.log_model(model, sm.output.model, name=f"velocity_mlp-{sm.wildcards.run}")
+    log_model(run, model, sm.output.model, name=f"velocity_mlp-{sm.wildcards.run}")
     write_configuration_outputs(configuration, metrics, predictions, splits, sm.output.metrics, sm.output.predictions)
     run.log_metrics(metrics)
     print(metrics)
