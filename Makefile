@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 PROFILE ?= default
 
-.PHONY: venv reproduce test lint dry-run mlflow mlflow-sync report rulegraph run-time clean
+.PHONY: venv browser reproduce test lint dry-run mlflow mlflow-sync report rulegraph run-time clean
 
 $(BIN)/snakemake: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -18,8 +18,16 @@ venv: $(BIN)/snakemake
 reproduce: venv
 	$(BIN)/snakemake all --config profile=$(PROFILE)
 
-## The test suite (what CI runs)
-test: venv
+## Headless Chromium for tests/test_mlflow_ui.py: apt-get installs it where it is missing and we are root;
+## elsewhere that one test skips (install chromium yourself, or set REDSUP_CHROMIUM to a Chrome binary)
+browser:
+	@command -v chromium >/dev/null 2>&1 || command -v chromium-browser >/dev/null 2>&1 || \
+	  { [ "$$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1 && apt-get update -qq && \
+	    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium; } || \
+	  echo "make browser: no Chromium; tests/test_mlflow_ui.py will skip" >&2
+
+## The test suite (what CI runs: .ci/run)
+test: venv browser
 	$(BIN)/python -m pytest tests
 
 lint: venv

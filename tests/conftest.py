@@ -1,12 +1,8 @@
-"""Shared fixtures: one tiny build of the whole workflow per test session; an `mlflow server` for a test."""
-import contextlib
+"""Shared fixtures: one tiny build of the whole workflow per test session (`built`, or `tiny`: a finished
+build named by $REDSUP_TINY_BUILD)."""
 import os
-import signal
-import socket
 import subprocess
 import sys
-import time
-import urllib.request
 from pathlib import Path
 
 import pytest
@@ -32,46 +28,9 @@ def built(tmp_path_factory):
     return workdir
 
 
-def free_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
-
-@contextlib.contextmanager
-def mlflow_server(uri, workdir, cli=None, env=None, timeout=120):
-    """`mlflow server` over the store `uri` on a free port of 127.0.0.1 (log: workdir/server.log); yields
-    its URL once /health answers, and stops it (with its uvicorn worker) on leaving."""
-    workdir = Path(workdir)
-    port = free_port()
-    log = (workdir / "server.log").open("w")
-    proc = subprocess.Popen(
-        [*(cli or [sys.executable, "-m", "mlflow"]), "server", "--backend-store-uri", uri, "--host", "127.0.0.1",
-         "--port", str(port), "--workers", "1", "--default-artifact-root", str(workdir / "server-artifacts")],
-        cwd=workdir, env={**os.environ, **(env or {})}, stdout=log, stderr=subprocess.STDOUT,
-        start_new_session=True)  # own process group: the server forks a uvicorn worker
-    base = f"http://127.0.0.1:{port}"
-    try:
-        deadline = time.monotonic() + timeout
-        while True:
-            if proc.poll() is not None:
-                raise AssertionError(f"mlflow server exited:\n{(workdir / 'server.log').read_text()}")
-            try:
-                with urllib.request.urlopen(f"{base}/health", timeout=2) as resp:
-                    if resp.status == 200:
-                        break
-            except OSError:
-                pass
-            if time.monotonic() > deadline:
-                raise AssertionError(f"mlflow server not up in {timeout} s:\n{(workdir / 'server.log').read_text()}")
-            time.sleep(0.5)
-        yield base
-    finally:
-        if proc.poll() is None:
-            os.killpg(proc.pid, signal.SIGTERM)
-            try:
-                proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                os.killpg(proc.pid, signal.SIGKILL)
-                proc.wait()
-        log.close()
+@pytest.fixture(scope="module")
+def tiny(request):
+    """The session's tiny build, or a finished one named by $REDSUP_TINY_BUILD (read only)."""
+    path = os.environ.get("REDSUP_TINY_BUILD")
+    return Path(path) if path else request.getfixturevalue("built")

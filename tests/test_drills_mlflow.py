@@ -72,13 +72,6 @@ def test_killed_and_failed_jobs_are_never_running_in_the_store(tmp_path):
 
 
 # ------------------------------------------------------------------------ the tiny build's store
-@pytest.fixture(scope="module")
-def tiny(request):
-    """The session's tiny build, or a finished one named by $REDSUP_TINY_BUILD (read only here)."""
-    path = os.environ.get("REDSUP_TINY_BUILD")
-    return Path(path) if path else request.getfixturevalue("built")
-
-
 def _copy_build(built, dst):
     """The build's results with raw and prepared linked (read only here), so artifacts still resolve."""
     (dst / "results").mkdir(parents=True)

@@ -16,32 +16,19 @@ What should be seen is read from the store with MlflowClient first. Skips only w
 """
 import json
 import math
-import os
 import re
-import shutil
-import sqlite3
 import subprocess
 import time
 from html.parser import HTMLParser
-from pathlib import Path
 from urllib.parse import quote
 
 import pytest
 
-from conftest import mlflow_server
+from redsup.mlflow_ui import copy_store, find_chromium, mlflow_server
 
 pytestmark = pytest.mark.workflow
 
-BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
 TABLE_PARENT = "mccraith_ch7_table3"        # preferred; any table parent with children otherwise
-
-
-def find_chromium():
-    for name in (os.environ.get("REDSUP_CHROMIUM"), *BROWSERS):
-        path = name and shutil.which(name)
-        if path:
-            return path
-    return None
 
 
 @pytest.fixture(scope="module")
@@ -53,24 +40,9 @@ def chromium():
 
 
 @pytest.fixture(scope="module")
-def tiny(request):
-    """The session's tiny build, or a finished one named by $REDSUP_TINY_BUILD (read only here)."""
-    path = os.environ.get("REDSUP_TINY_BUILD")
-    return Path(path) if path else request.getfixturevalue("built")
-
-
-@pytest.fixture(scope="module")
 def store(tiny, tmp_path_factory):
     """A consistent copy of the build's store (sqlite backup: the server may migrate or write to it)."""
-    db = tmp_path_factory.mktemp("mlflow_ui") / "mlflow.db"
-    src = sqlite3.connect(f"file:{tiny / 'results' / 'mlflow.db'}?mode=ro", uri=True)
-    dst = sqlite3.connect(db)
-    try:
-        src.backup(dst)
-    finally:
-        src.close()
-        dst.close()
-    return db
+    return copy_store(tiny / "results" / "mlflow.db", tmp_path_factory.mktemp("mlflow_ui") / "mlflow.db")
 
 
 @pytest.fixture(scope="module")

@@ -17,7 +17,7 @@ import pytest
 
 pytest.importorskip("mlflow")
 
-from conftest import mlflow_server  # noqa: E402
+from redsup.mlflow_ui import mlflow_server  # noqa: E402
 from redsup import runlog, tracking  # noqa: E402
 
 WORKFLOW_DIR = Path(tracking.__file__).resolve().parents[1]

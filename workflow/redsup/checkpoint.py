@@ -51,4 +51,3 @@ def load(path: str | Path, kind: str) -> dict:
     if data.get("kind") != kind:
         raise ValueError(f"{path}: a {data.get('kind')!r} checkpoint, expected {kind!r}")
     return data
-

@@ -144,7 +144,6 @@ class RunRecord:
         self._stash(name).write_text(text)
         self.data["artifacts"].append([str(self._stash(name)), None])
 
-    # models ----------------------------------------------------------------------------------
     # persistence -----------------------------------------------------------------------------
     def write(self) -> None:
         tmp = self.path.with_name(self.path.name + ".part")

@@ -472,6 +472,18 @@ def _sync_parent_artifacts(client, registry: Mapping[str, Any], table_ids: list[
     return logged
 
 
+def _parent_spans(records: list[tuple[Path, dict]], final: bool) -> tuple[dict[str, int], dict[str, int]]:
+    """Per parent name: the earliest start of its records and the latest end of its finished ones (ms)."""
+    starts: dict[str, int] = {}
+    ends: dict[str, int] = {}
+    for _, data in records:
+        name = data["parent"]
+        starts[name] = min(starts.get(name, data["start_time"]), data["start_time"])
+        if data.get("end_time") and record_status(data, final) in TERMINAL:
+            ends[name] = max(ends.get(name, 0), int(data["end_time"]))
+    return starts, ends
+
+
 def _time_parents(client, registry: Mapping[str, Any], ends: Mapping[str, int]) -> int:
     """Each parent ends with its last finished child (``ends``: parent name -> ms); written only when it moved.
     Returns how many parents changed."""
@@ -531,9 +543,7 @@ def _sync_records(tracking_uri, plan, runs_root: Path, out_json, *, artifact_roo
     plan["stages"].setdefault("data", "Embedded world and data preparation")
     for name in sorted({data["parent"] for _, data in records} - known):
         plan["parents"].append({"name": name, "stage": "data"})
-    starts: dict[str, int] = {}
-    for _, data in records:
-        starts[data["parent"]] = min(starts.get(data["parent"], data["start_time"]), data["start_time"])
+    starts, ends = _parent_spans(records, final)
     registry = init_store(tracking_uri, plan, out_json, artifact_root=artifact_root,
                           experiment_prefix=experiment_prefix, starts=starts)
     client = _client(tracking_uri)
@@ -590,10 +600,6 @@ def _sync_records(tracking_uri, plan, runs_root: Path, out_json, *, artifact_roo
             updated += 1
         updated += bool(_reconcile(client, run, {}, {}, 0))
     parents_logged = _sync_parent_artifacts(client, registry, list(table_ids or []), results_root)
-    ends: dict[str, int] = {}
-    for _, data in records:
-        if data.get("end_time") and record_status(data, final) in TERMINAL:
-            ends[data["parent"]] = max(ends.get(data["parent"], 0), int(data["end_time"]))
     timed = _time_parents(client, registry, ends)
     registry.update({"imported": imported, "updated": updated, "deleted": deleted, "records": len(records),
                      "unreadable": unreadable, "parents_with_new_artifacts": parents_logged,
