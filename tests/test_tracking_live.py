@@ -235,3 +235,30 @@ def test_live_sync_leaves_the_cores_to_the_jobs():
     assert tracking.live_wait(10.0, 0.0, 0.1) == 10.0
     # syncing then takes exactly the share of the time: 4 / (4 + 36) = 0.1
     assert 4.0 / (4.0 + tracking.live_wait(10.0, 4.0, 0.1)) == pytest.approx(0.1)
+
+
+def test_the_store_creating_first_sync_does_not_set_the_pace(tmp_path):
+    """The first sync creates the store (a one-off of seconds); pacing by it would wait 9x that before the
+    next look, longer than a short build. Only the later, ordinary syncs set the pace."""
+    watched = tmp_path / "runs"
+    watched.mkdir()
+    calls = []
+
+    def sync():
+        calls.append(time.monotonic())
+        time.sleep(1.0 if len(calls) == 1 else 0.0)
+
+    live = tracking.LiveSync(sync, [watched], interval_s=0.05, share=0.1).start()
+    try:
+        deadline = time.monotonic() + 30
+        while not calls or live.syncs < 1:
+            assert time.monotonic() < deadline
+            time.sleep(0.02)
+        assert live.last_sync_s == 0.0  # the 1 s first sync is not counted: it would mean a 9 s wait
+        (watched / "a.json").write_text("{}")
+        while len(calls) < 2:
+            assert time.monotonic() < deadline, "a change after the first sync waited as if it set the pace"
+            time.sleep(0.02)
+    finally:
+        live.stop()
+    assert calls[1] - calls[0] < 5.0

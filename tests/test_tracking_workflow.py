@@ -97,7 +97,7 @@ def test_every_table_filter_returns_exactly_its_rows_runs(built, store):
             assert [a.path for a in client.list_artifacts(parent.info.run_id, "figure")] == [f"figure/{table}.png"]
 
 
-def test_runs_appear_live_while_snakemake_runs(built, tmp_path):
+def test_runs_appear_live_while_snakemake_runs(tiny, tmp_path):
     """A second process sees finished runs in the store before the Snakemake invocation ends (live sync every
     second here), and the end leaves no RUNNING run: six preparation jobs of one scene, one at a time."""
     import shutil
@@ -107,16 +107,16 @@ def test_runs_appear_live_while_snakemake_runs(built, tmp_path):
 
     from conftest import SNAKEMAKE
 
-    scene = next(p for p in sorted((built / "results" / "raw" / "world_kitti").iterdir()) if p.name.startswith("test"))
+    scene = next(p for p in sorted((tiny / "results" / "raw" / "world_kitti").iterdir()) if p.name.startswith("test"))
     work = tmp_path / "live"
     shutil.copytree(scene, work / "results" / "raw" / "world_kitti" / scene.name)
     prepared = f"results/prepared/world_kitti/{scene.name}"
     targets = [f"{prepared}/{name}" for name in ("cam_front_depth.npz", "cam_front_right_depth.npz", "cam_front.npz",
                                                 "road.npz", "detections_coco.npz", "detections_cityscapes.npz")]
-    live = tmp_path / "live.yaml"  # extends config.yaml: sync every second
+    live = tmp_path / "live.yaml"  # extends config.yaml: sync every second, up to half the time
     live.write_text(yaml.safe_dump({"mlflow": {"tracking_uri": "sqlite:///results/mlflow.db",
                                                "artifact_root": "results/mlartifacts", "experiment_prefix": "redsup/",
-                                               "live_interval_s": 1}}))
+                                               "live_interval_s": 1, "live_share": 0.5}}))
     cmd = [*SNAKEMAKE[:-1], "1", "--directory", str(work), *targets, "--config", "profile=tiny",
            "--configfile", str(live)]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)

@@ -678,7 +678,8 @@ class LiveSync:
             except Exception as exc:  # noqa: BLE001
                 print(f"MLflow live sync failed ({type(exc).__name__}: {exc}); the final sync retries",
                       file=sys.stderr)
-            self.last_sync_s = time.perf_counter() - start
+            if self.syncs > 1:  # the first sync creates the store (schema migrations): a one-off, not the pace
+                self.last_sync_s = time.perf_counter() - start
 
     def start(self) -> "LiveSync":
         self._thread.start()
