@@ -76,3 +76,16 @@ def test_configure_sets_the_thread_count_and_deterministic_algorithms():
     finally:
         torch.set_num_threads(before[0])
         torch.use_deterministic_algorithms(before[1])
+
+
+def test_configure_does_not_import_the_compiler():
+    """torch.use_deterministic_algorithms imports torch._inductor.config (about a second per job); configure
+    sets the same switches without it. In a fresh process, since this one may have the compiler loaded."""
+    import subprocess
+    import sys
+
+    code = ("import sys, torch; from redsup import determinism; determinism.configure(1); "
+            "print(torch.are_deterministic_algorithms_enabled(), "
+            "torch.is_deterministic_algorithms_warn_only_enabled(), 'torch._inductor.config' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.split()
+    assert out == ["True", "True", "False"]

@@ -431,7 +431,7 @@ def test_table_frame_from_config_section():
 
 
 def test_adam_matches_torch_and_step_decay(tmpl):
-    from redsup.lifting.train import Adam, clip_grad_norm
+    from redsup.lifting.train import Adam, clip_grad_norm  # Adam: redsup.optim (tests/test_optim.py)
 
     torch.manual_seed(0)
     a = torch.nn.Linear(3, 2)

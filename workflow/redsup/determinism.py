@@ -18,6 +18,23 @@ def configure(threads: int) -> None:
     if not isinstance(threads, int) or isinstance(threads, bool) or threads < 1:
         raise ValueError(f"threads must be a positive integer, got {threads!r}")
     torch.set_num_threads(threads)
-    torch.use_deterministic_algorithms(True, warn_only=True)
+    deterministic_algorithms(torch)
     # no NaN fill of every torch.empty: it costs time, and no result here may depend on uninitialised memory
     torch.utils.deterministic.fill_uninitialized_memory = False
+
+
+def deterministic_algorithms(torch) -> None:
+    """``torch.use_deterministic_algorithms(True, warn_only=True)`` without its first line, which imports
+    ``torch._inductor.config`` (1.1 s of CPU idle, up to 2.8 s beside another job, in every torch job: a sixth
+    of a tiny build's job time) only to set the compiler's ``deterministic`` flag. No job here compiles a
+    graph; if the compiler is already imported, its flag is set as the public function would."""
+    import sys
+
+    inductor = sys.modules.get("torch._inductor.config")
+    setter = getattr(torch._C, "_set_deterministic_algorithms", None)
+    if setter is None:   # another torch than the pinned one: the public, slower way
+        torch.use_deterministic_algorithms(True, warn_only=True)
+        return
+    if inductor is not None:
+        inductor.deterministic = True
+    setter(True, warn_only=True)

@@ -18,6 +18,8 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 import torch
 from torch import nn
 
+from redsup.optim import SGD
+
 Models = Mapping[str, nn.Module]
 Snapshot = dict[str, dict[str, torch.Tensor]]
 LossFn = Callable[[Models, object], Mapping[str, torch.Tensor]]
@@ -149,7 +151,7 @@ def adapt(models: Models, loss_fn: LossFn, batch, params: Sequence[nn.Parameter]
         for p in all_params:
             p.requires_grad_(id(p) in selected)
             p.grad = None
-        optimizer = torch.optim.SGD(list(params), lr=lr) if params and steps > 0 else None
+        optimizer = SGD(list(params), lr=lr) if params and steps > 0 else None
         if callback is not None:
             callback(0, None, 0.0)
         elapsed = 0.0

@@ -112,7 +112,7 @@ def batch_loss(models: Mapping[str, nn.Module], batch: Mapping, *, min_depth: fl
     return loss_from_outputs(batch, disps, transforms, min_depth=min_depth, max_depth=max_depth, **loss_kwargs)
 
 
-def train_step(models: Mapping[str, nn.Module], optimizer: torch.optim.Optimizer, batch: Mapping,
+def train_step(models: Mapping[str, nn.Module], optimizer, batch: Mapping,
                **loss_kwargs) -> dict[str, float]:
     """One optimiser step on ``batch`` (models in train mode are the caller's choice); returns float terms."""
     optimizer.zero_grad(set_to_none=True)
@@ -120,14 +120,6 @@ def train_step(models: Mapping[str, nn.Module], optimizer: torch.optim.Optimizer
     terms["loss"].backward()
     optimizer.step()
     return {k: float(v.detach()) for k, v in terms.items()}
-
-
-def make_optimizer(models: Mapping[str, nn.Module], lr: float = 1e-4, step_size: int = 15, gamma: float = 0.1
-                   ) -> tuple[torch.optim.Optimizer, torch.optim.lr_scheduler.StepLR]:
-    """Adam 1e-4 with a step decay (Monodepth2: x0.1 after 15 of 20 epochs; call ``scheduler.step()`` per epoch)."""
-    params = [p for m in models.values() for p in m.parameters()]
-    optimizer = torch.optim.Adam(params, lr=lr)
-    return optimizer, torch.optim.lr_scheduler.StepLR(optimizer, step_size=step_size, gamma=gamma)
 
 
 # ---- direct optimisation of the outputs (ch. 4 Table 4) -----------------------------------------------------

@@ -15,6 +15,7 @@ from torch import nn
 from tqdm import tqdm
 
 from redsup.depth import data, pipeline
+from redsup.optim import Adam
 
 
 def batches(n_samples: int, batch_size: int, steps: int, rng: np.random.Generator):
@@ -59,7 +60,7 @@ def train(models: Mapping[str, nn.Module], seqs: Seq[data.Sequence], sources: Se
     torch.manual_seed(seed)
     generator = torch.Generator().manual_seed(seed)
     params = [p for m in models.values() for p in m.parameters()]
-    optimizer = torch.optim.Adam(params, lr=lr)
+    optimizer = Adam(params, lr=lr)
     fractions = [decay_at] if isinstance(decay_at, (int, float)) else list(decay_at)
     decay_steps = {int(round(f * steps)) for f in fractions} - {0}
     for m in models.values():
@@ -73,8 +74,7 @@ def train(models: Mapping[str, nn.Module], seqs: Seq[data.Sequence], sources: Se
     for step, idx in enumerate(tqdm(batches(len(samples), batch_size, steps, rng), total=steps, desc="train depth",
                                     unit="step", mininterval=5), start=1):
         if step - 1 in decay_steps:
-            for group in optimizer.param_groups:
-                group["lr"] = group["lr"] * gamma
+            optimizer.lr = optimizer.lr * gamma
         items = [samples[i] for i in idx]
         flips = (rng.random(len(items)) < 0.5).tolist() if flip else None
         batch = _to(data.make_batch(seqs, items, sources, flips), device)
@@ -85,7 +85,7 @@ def train(models: Mapping[str, nn.Module], seqs: Seq[data.Sequence], sources: Se
             terms = criterion_step(criterion, models, optimizer, batch, step)
         if not np.isfinite(terms["loss"]):
             raise FloatingPointError(f"training loss became {terms['loss']} at step {step}")
-        terms["lr"] = optimizer.param_groups[0]["lr"]
+        terms["lr"] = optimizer.lr
         last = terms
         for k, v in terms.items():
             epoch_terms.setdefault(k, []).append(v)
@@ -124,7 +124,7 @@ def train(models: Mapping[str, nn.Module], seqs: Seq[data.Sequence], sources: Se
 
 
 def criterion_step(criterion: Callable[..., Mapping[str, torch.Tensor]], models: Mapping[str, nn.Module],
-                   optimizer: torch.optim.Optimizer, batch: Mapping, step: int) -> dict[str, float]:
+                   optimizer: Adam, batch: Mapping, step: int) -> dict[str, float]:
     """One optimiser step on ``criterion(models, batch, step)["loss"]``; returns float terms."""
     optimizer.zero_grad(set_to_none=True)
     terms = criterion(models, batch, step)

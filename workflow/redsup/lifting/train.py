@@ -1,9 +1,8 @@
 """The optimisation loop of the lifting network (McCraith ch. 6 sec. IV-c): Adam, learning rate multiplied by
 `lr_gamma` every `lr_step_epochs` epochs, batches of `batch_size` objects from `ObjectTable.epoch_batches`.
 
-`Adam` is torch.optim.Adam's update written out (same defaults, same numbers): constructing any
-torch.optim optimiser imports torch._dynamo, about 1.7 s of CPU in every training job, which at the tiny
-profile costs more than the training itself.
+`Adam` is `redsup.optim.Adam`, torch.optim.Adam's update written out (constructing a torch.optim optimiser
+imports torch._dynamo, more than the training itself costs in the tiny profile).
 
 The loop knows nothing about which losses it optimises (the criterion does). A step whose loss is not finite
 is skipped (no update) and counted; gradients are clipped to `grad_clip` (norm). Curves: the mean of every
@@ -20,33 +19,7 @@ import torch
 from tqdm import tqdm
 
 from redsup.lifting.data import ObjectTable
-
-
-class Adam:
-    """Adam (Kingma & Ba 2015) with bias correction, as torch.optim.Adam(lr, betas, eps), no weight decay."""
-
-    def __init__(self, params, lr: float, betas=(0.9, 0.999), eps: float = 1e-8):
-        self.params = [p for p in params if p.requires_grad]
-        self.lr, self.betas, self.eps = float(lr), betas, float(eps)
-        self.m = [torch.zeros_like(p) for p in self.params]
-        self.v = [torch.zeros_like(p) for p in self.params]
-        self.t = 0
-
-    def zero_grad(self) -> None:
-        for p in self.params:
-            p.grad = None
-
-    @torch.no_grad()
-    def step(self) -> None:
-        self.t += 1
-        b1, b2 = self.betas
-        c1, c2 = 1 - b1 ** self.t, 1 - b2 ** self.t
-        for p, m, v in zip(self.params, self.m, self.v):
-            if p.grad is None:
-                continue
-            m.mul_(b1).add_(p.grad, alpha=1 - b1)
-            v.mul_(b2).addcmul_(p.grad, p.grad, value=1 - b2)
-            p.addcdiv_(m, (v.sqrt() / math.sqrt(c2)).add_(self.eps), value=-self.lr / c1)
+from redsup.optim import Adam
 
 
 def clip_grad_norm(params, max_norm: float) -> float:

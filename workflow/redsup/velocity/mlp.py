@@ -19,6 +19,7 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
+from redsup.optim import Adam
 from redsup.velocity.geometry import Calibration
 from redsup.velocity.smoothing import gaussian_smooth
 
@@ -103,14 +104,14 @@ def train_mlp(features: np.ndarray, targets: np.ndarray, *, hidden: int, layers:
     model = VelocityMLP(x.shape[1], hidden, layers, dropout)
     model.set_normalisation(features)
     model.to(device)
-    opt = torch.optim.Adam(model.parameters(), lr=lr)
-    sched = torch.optim.lr_scheduler.ExponentialLR(opt, gamma=lr_decay)
+    opt = Adam(model.parameters(), lr=lr)
     evals = {k: (torch.as_tensor(a, dtype=torch.float32, device=device),
                  torch.as_tensor(b, dtype=torch.float32, device=device))
              for k, (a, b) in (eval_sets or {}).items() if len(a)}
     curve = []
     n = len(x)
     for epoch in tqdm(range(epochs), desc="train velocity MLP", unit="epoch", mininterval=5):
+        opt.lr = lr * lr_decay ** epoch                        # exponential decay per epoch
         model.train()
         order = torch.randperm(n, generator=gen).to(device)
         total = 0.0
@@ -121,8 +122,7 @@ def train_mlp(features: np.ndarray, targets: np.ndarray, *, hidden: int, layers:
             loss.backward()
             opt.step()
             total += loss.detach().item() * len(idx)
-        row = {"train_loss": total / n, "lr": opt.param_groups[0]["lr"]}
-        sched.step()
+        row = {"train_loss": total / n, "lr": opt.lr}
         if evals:
             model.eval()
             with torch.no_grad():
