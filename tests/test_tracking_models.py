@@ -1,6 +1,6 @@
-"""Trained networks as MLflow models (issue 15): a training job's `redsup.mlflow_model.log_model` writes an MLflow model
-directory of its checkpoint's network; the sync makes it a logged model of the job's run, once, linked to the
-run, with the resolved config; `mlflow.pytorch.load_model("models:/<id>")` gives the trained network back. A
+"""Trained networks as MLflow models (issue 15): a training job's `redsup.mlflow_model.log_model` pickles its
+checkpoint's network (without importing mlflow); the sync makes it an MLflow model directory and a logged
+model of the job's run, once, linked to the run, with the resolved config; `mlflow.pytorch.load_model("models:/<id>")` gives the trained network back. A
 rebuilt store (records only) gets the same models. Parents span their children: first start to last end."""
 from __future__ import annotations
 
@@ -87,6 +87,34 @@ def test_one_logged_model_linked_to_its_run(store):
     assert model.tags["redsup.config_hash"] == run.data.tags["redsup.config_hash"]
     assert model.tags["redsup.checkpoint"].endswith("mlp.pt")
     assert json.loads(model.params["network.hidden"]) == 3 and model.params["seed"] == "3"
+
+
+def test_the_job_side_pickles_the_module_without_importing_mlflow(tmp_path):
+    """log_model in a fresh process (a training job): module.pt beside the record, an entry naming it, the
+    checkpoint's kind and meta; mlflow never imported (its import and requirement check cost 2-3 s a job)."""
+    import subprocess
+    import sys
+
+    code = f"""
+import json, sys, torch
+from pathlib import Path
+from redsup import runlog
+from redsup.mlflow_model import log_model
+from redsup.velocity.mlp import VelocityMLP, save_model
+model = VelocityMLP(in_dim=4, hidden=3, layers=1, dropout=0.0)
+root = Path({str(tmp_path)!r})
+with runlog.child_run(root / "r.json", "t", "r", rule="velocity_mlp", wildcards={{}}, config={{"a": 1}}) as run:
+    save_model(model, root / "m.pt", {{"a": 1}}, {{"seed": 7}})
+    log_model(run, model, root / "m.pt", name="velocity_mlp/r.1")
+print("mlflow" in sys.modules)
+"""
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.split() == ["False"]
+    [entry] = json.loads((tmp_path / "r.json").read_text())["models"]
+    assert entry["name"] == "velocity_mlp-r-1" and entry["kind"] == "velocity_mlp" and entry["params"]["seed"] == "7"
+    assert Path(entry["module"]) == tmp_path / "r.artifacts" / "models" / "velocity_mlp-r-1" / "module.pt"
+    assert isinstance(torch.load(entry["module"], weights_only=False), torch.nn.Module)
+    assert not list(tmp_path.rglob("MLmodel"))   # the MLflow directory is the sync's
 
 
 def test_loaded_model_computes_what_the_trained_one_did(store, monkeypatch):

@@ -1,9 +1,9 @@
 """A training job's network as an MLflow model (``mlflow.pytorch`` flavour), for the MLflow sync.
 
-`log_model` writes the model directory into the job's run record artifacts and notes it in the record
-(``models``); `redsup.tracking` turns each entry into a logged model of the job's run. Only training jobs import
-this module: it imports torch, and mlflow when called (about 1.5 s), which the other jobs and their conda envs
-need not have.
+`log_model` (in the training job) pickles the network into the job's run record artifacts and notes it in the
+record (``models``); `redsup.tracking` makes each entry an MLflow model directory (`materialise`, importing
+mlflow once per sync, not once per job) and a logged model of the job's run. Imports torch; mlflow only in
+`save_mlflow_model`.
 """
 from __future__ import annotations
 
@@ -26,20 +26,16 @@ from redsup.runlog import RunRecord, flatten_params, plain
 FORBIDDEN = "/:.%\"'"   # characters MLflow does not allow in a model name
 
 
-def save_mlflow_model(module: nn.Module, folder: str | Path, checkpoint_path: str | Path,
-                      extra_files: list[str | Path] = (), metadata: Mapping[str, Any] | None = None) -> dict:
-    """``module`` (the trained network of the checkpoint at ``checkpoint_path``) as an MLflow model directory in
-    ``folder`` (replaced): the ``mlflow.pytorch`` flavour of a CPU copy in eval mode, pickled (the default
-    ``pt2`` format needs a traceable ``forward`` and an input example; a depth system is a ``ModuleDict``), with
-    ``extra_files`` (the resolved config) and explicit pip requirements (inferring them would load the model in
-    a subprocess). Returns the checkpoint's ``kind`` and ``meta``. Writes files only: no tracking store is
-    opened."""
-    os.environ.setdefault("MLFLOW_DISABLE_TELEMETRY", "true")   # a job talks to no server, telemetry's neither
+def save_mlflow_model(module: nn.Module, folder: str | Path, kind: str, checkpoint_path: str | Path,
+                      extra_files: list[str | Path] = (), metadata: Mapping[str, Any] | None = None) -> Path:
+    """``module`` (the trained network of the ``kind`` checkpoint at ``checkpoint_path``) as an MLflow model
+    directory in ``folder`` (replaced): the ``mlflow.pytorch`` flavour of a CPU copy in eval mode, pickled (the
+    default ``pt2`` format needs a traceable ``forward`` and an input example; a depth system is a
+    ``ModuleDict``), with ``extra_files`` (the resolved config) and explicit pip requirements (inferring them
+    would load the model in a subprocess). Writes files only: no tracking store is opened."""
+    os.environ.setdefault("MLFLOW_DISABLE_TELEMETRY", "true")
     import mlflow.pytorch
 
-    data = torch.load(checkpoint_path, map_location="cpu", weights_only=False)
-    if not isinstance(data, dict) or data.get("format") != FORMAT:
-        raise ValueError(f"{checkpoint_path}: not a {FORMAT} checkpoint")
     folder = Path(folder)
     if folder.exists():
         shutil.rmtree(folder)
@@ -52,34 +48,51 @@ def save_mlflow_model(module: nn.Module, folder: str | Path, checkpoint_path: st
     try:
         mlflow.pytorch.save_model(net, str(folder), serialization_format="pickle", pip_requirements=requirements,
                                   extra_files=[str(f) for f in extra_files] or None,
-                                  metadata=plain({"redsup_kind": data["kind"], "checkpoint": str(checkpoint_path),
+                                  metadata=plain({"redsup_kind": kind, "checkpoint": str(checkpoint_path),
                                                   **dict(metadata or {})}))
     finally:
         logger.setLevel(level)
-    return {"kind": data["kind"], "meta": data["meta"]}
+    return folder
 
 
 def log_model(run: RunRecord, module: nn.Module, checkpoint: str | Path, name: str) -> str:
     """The trained ``module`` of the checkpoint just written at ``checkpoint`` (`redsup.checkpoint.save`) as an
-    MLflow model of ``run``: an MLflow model directory (the resolved config as ``extra_files/config.yaml``)
-    written now into the record's artifact folder (``models/<name>``), and an entry in the record's ``models``
-    that the sync turns into a logged model of this run (params: the checkpoint's meta; tags: kind, checkpoint
-    path, config hash). ``name`` loses the characters MLflow forbids. A failure is printed and tagged
-    (``redsup.model_error``), never raised: the checkpoint, the job's result, is already written."""
+    MLflow model of ``run``: the module, a CPU copy in eval mode, pickled now into the record's artifact folder
+    (``models/<name>/module.pt``), and an entry in the record's ``models`` that the sync turns into a logged
+    model of this run (`materialise`: the MLflow model directory, the resolved config as
+    ``extra_files/config.yaml``; params: the checkpoint's meta; tags: kind, checkpoint path, config hash). The
+    job does not import mlflow: its import and its check of every installed package's requirements cost 2-3 s
+    of CPU, a third of a tiny training job; the sync pays them once. ``name`` loses the characters MLflow
+    forbids. A failure is printed and tagged (``redsup.model_error``), never raised: the checkpoint, the
+    job's result, is already written."""
     name = "".join("-" if c in FORBIDDEN else c for c in str(name))
     folder = run.artifact_dir / "models" / name
     try:
-        info = save_mlflow_model(module, folder, checkpoint, extra_files=[run.artifact_dir / "config.yaml"],
-                                 metadata={"config_hash": run.data["tags"].get("redsup.config_hash")})
+        data = torch.load(checkpoint, map_location="cpu", weights_only=False)
+        if not isinstance(data, dict) or data.get("format") != FORMAT:
+            raise ValueError(f"{checkpoint}: not a {FORMAT} checkpoint")
+        if folder.exists():
+            shutil.rmtree(folder)
+        folder.mkdir(parents=True)
+        torch.save(copy.deepcopy(module).cpu().eval(), folder / "module.pt")
     except Exception as exc:  # noqa: BLE001
         print(f"run record: model {name} not saved for MLflow ({type(exc).__name__}: {exc})", file=sys.stderr)
         run.data["tags"]["redsup.model_error"] = f"{name}: {type(exc).__name__}: {exc}"[:5000]
         return name
     tags = {k: v for k, v in run.data["tags"].items()
             if k in ("redsup.config_hash", "redsup.git_commit", "redsup.profile", "redsup.rule")}
-    entry = {"name": name, "path": str(folder), "checkpoint": str(checkpoint), "kind": info["kind"],
-             "params": flatten_params(info["meta"]),
-             "tags": {**tags, "redsup.kind": info["kind"], "redsup.checkpoint": str(checkpoint)}}
+    entry = {"name": name, "module": str(folder / "module.pt"), "config": str(run.artifact_dir / "config.yaml"),
+             "checkpoint": str(checkpoint), "kind": data["kind"], "params": flatten_params(data["meta"]),
+             "tags": {**tags, "redsup.kind": data["kind"], "redsup.checkpoint": str(checkpoint)}}
     models = run.data.setdefault("models", [])
     models[:] = [m for m in models if m["name"] != name] + [entry]
     return name
+
+
+def materialise(entry: Mapping[str, Any], folder: str | Path) -> Path:
+    """The MLflow model directory of one ``models`` entry of a record (`log_model`) written into ``folder``:
+    its pickled module, checkpoint and resolved config through `save_mlflow_model`. Returns ``folder``."""
+    module = torch.load(entry["module"], map_location="cpu", weights_only=False)
+    extra = [entry["config"]] if entry.get("config") and Path(entry["config"]).is_file() else []
+    return save_mlflow_model(module, folder, entry["kind"], entry["checkpoint"], extra_files=extra,
+                             metadata={"config_hash": (entry.get("tags") or {}).get("redsup.config_hash")})

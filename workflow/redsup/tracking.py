@@ -281,8 +281,8 @@ def _log_datasets(client, run_id: str, datasets: list[Mapping[str, Any]]) -> Non
 
 
 def _log_models(client, run_id: str, experiment_id: str, models: list[Mapping[str, Any]]) -> int:
-    """Each model of a record (`redsup.mlflow_model.log_model`: an MLflow model directory) as an MLflow logged model of the
-    run: created with the run as its source (found again by run and name: never twice), its directory uploaded,
+    """Each model of a record (`redsup.mlflow_model.log_model`: a pickled module) as an MLflow logged model of the
+    run: created with the run as its source (found again by run and name: never twice), its MLflow model uploaded,
     READY, and linked as the run's output (the run's Models column and Logged models tab). Returns how many
     were created."""
     from mlflow.entities import LoggedModelOutput, LoggedModelStatus
@@ -295,9 +295,9 @@ def _log_models(client, run_id: str, experiment_id: str, models: list[Mapping[st
     linked = {o.model_id for o in (run.outputs.model_outputs if run.outputs else [])}
     created = 0
     for entry in models:
-        folder = Path(entry["path"])
-        if not (folder / "MLmodel").is_file():
-            print(f"mlflow sync: model {folder} no longer exists, skipped", file=sys.stderr)
+        source = Path(entry["module"])
+        if not source.exists():
+            print(f"mlflow sync: model {source} no longer exists, skipped", file=sys.stderr)
             continue
         model = found.get(entry["name"])
         if model is None:
@@ -306,11 +306,27 @@ def _log_models(client, run_id: str, experiment_id: str, models: list[Mapping[st
                            model_type=entry.get("kind"))
             created += 1
         if model.status != LoggedModelStatus.READY:   # new, or an upload a crash interrupted
-            _retry(client.log_model_artifacts, model.model_id, str(folder))
+            try:
+                _upload_model(client, model.model_id, entry)
+            except Exception as exc:  # noqa: BLE001  (the model stays PENDING; the next sync retries it)
+                print(f"mlflow sync: model {entry['name']} not uploaded ({type(exc).__name__}: {exc})",
+                      file=sys.stderr)
+                continue
             _retry(client.finalize_logged_model, model.model_id, LoggedModelStatus.READY)
         if model.model_id not in linked:
             _retry(client.log_outputs, run_id, [LoggedModelOutput(model.model_id, 0)])
     return created
+
+
+def _upload_model(client, model_id: str, entry: Mapping[str, Any]) -> None:
+    """The MLflow model directory of a record's entry into the store, built from its pickled module in a
+    temporary folder (`redsup.mlflow_model.materialise`; torch is imported only here)."""
+    import tempfile
+
+    from redsup.mlflow_model import materialise
+
+    with tempfile.TemporaryDirectory(prefix="redsup-model-") as tmp:
+        _retry(client.log_model_artifacts, model_id, str(materialise(entry, Path(tmp) / "model")))
 
 
 def _finish(client, run_id: str, parent_id: str, data: Mapping[str, Any], status: str, experiment_id: str) -> None:
