@@ -27,6 +27,7 @@ import numpy as np
 import torch
 
 from redsup.depth import adaptation, data, experiments, networks, pipeline
+from redsup.optim import Adam
 from timing import median_time
 
 
@@ -55,7 +56,7 @@ def bench(h: int, w: int, width: int, batch: int, repeats: int) -> dict:
     torch.manual_seed(0)
     models = networks.build_models(base_channels=width)
     n_params = sum(p.numel() for p in models.parameters())
-    optimizer, _ = pipeline.make_optimizer(models)
+    optimizer = Adam(models.parameters(), lr=1e-4)   # as redsup.depth.training
     train_batch = _batch(batch, h, w)
     models.train()
     flops = step_flops(lambda: pipeline.train_step(models, optimizer, train_batch))
