@@ -7,10 +7,13 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import cv2
 import numpy as np
-import pandas as pd
+
+if TYPE_CHECKING:
+    import pandas as pd
 
 LIDAR_RECORD_BYTES = 16  # x, y, z, reflectance as float32
 BOX_COLUMNS = ["frame", "track_id", "cls", "x", "y", "z", "l", "w", "h", "yaw", "vx", "vy", "vz",
@@ -169,6 +172,8 @@ def read_extrinsics(path: str | Path) -> dict[str, np.ndarray]:
 
 
 def read_boxes(path: str | Path) -> pd.DataFrame:
+    import pandas as pd   # here, not at the top: most jobs read scenes and never boxes (0.5 s of start-up each)
+
     path = Path(path)
     try:
         boxes = pd.read_csv(path)
