@@ -28,7 +28,7 @@ browser:
 
 ## The test suite (what CI runs: .ci/run)
 test: venv browser
-	$(BIN)/python -m pytest tests
+	$(BIN)/python -m pytest tests --durations=15
 
 lint: venv
 	$(BIN)/snakemake --lint
