@@ -7,7 +7,8 @@ medians measured side by side is the figure to quote).
 
 Prints whether both give the same loss and bitwise the same gradients (a speed change must not change numbers),
 then per side the median step, GFLOP/s (the step's FLOPs from ``torch.utils.flop_counter``) and its share of the
-fp32 sgemm peak measured at the end of the same run, and the speed-up.
+fp32 sgemm peak measured at the end of the same run, its process CPU time, and the speed-up in wall and CPU time
+(another process on the cores inflates wall time more than CPU time).
 """
 from __future__ import annotations
 
@@ -67,25 +68,31 @@ def main() -> None:
     (l0, g0), (l1, g1) = (loss_and_grad(fn) for fn in sides.values())
     print(f"loss before {l0:.8f} after {l1:.8f}; gradients bitwise equal: {torch.equal(g0, g1)}")
 
-    def step(fn) -> float:
+    def step(fn) -> tuple[float, float]:
         losses.self_supervised_loss = fn
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         pipeline.train_step(models, optimizer, batch, generator=torch.Generator().manual_seed(0))
-        return time.perf_counter() - start
+        return time.perf_counter() - start, time.process_time() - cpu
 
     flops = step_flops(lambda: step(sides["after"]))
     times = {k: [] for k in sides}
+    cpu = {k: [] for k in sides}
     for _ in range(args.repeats):
         for k, fn in sides.items():
-            times[k].append(step(fn))
+            wall, used = step(fn)
+            times[k].append(wall)
+            cpu[k].append(used)
     peak = sgemm_gflops()
     print(f"torch {torch.__version__}, {args.threads} thread(s), {args.size}, width {args.width}, batch {args.batch}, "
           f"{flops / 1e9:.2f} GFLOP per step, sgemm peak {peak:.1f} GFLOP/s, median of {args.repeats}")
     for k, v in times.items():
         m = statistics.median(v)
         print(f"{k:>6} ({args.rev if k == 'before' else 'working tree'}): {m * 1e3:.0f} ms per step, "
-              f"{flops / m / 1e9:.2f} GFLOP/s, {flops / m / 1e9 / peak:.3f} of peak")
-    print(f"speed-up {statistics.median(times['before']) / statistics.median(times['after']):.2f}x")
+              f"{flops / m / 1e9:.2f} GFLOP/s, {flops / m / 1e9 / peak:.3f} of peak; "
+              f"{statistics.median(cpu[k]) * 1e3:.0f} ms of process CPU")
+    print(f"speed-up {statistics.median(times['before']) / statistics.median(times['after']):.2f}x wall, "
+          f"{statistics.median(cpu['before']) / statistics.median(cpu['after']):.2f}x CPU (the steadier figure on a "
+          f"loaded machine)")
 
 
 if __name__ == "__main__":
