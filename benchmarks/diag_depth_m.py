@@ -29,16 +29,16 @@ import csv
 import glob
 import json
 import math
-import os
 import sys
 import time
-import zlib
 from pathlib import Path
 
 import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "workflow"))
+
+from redsup import config as rconfig  # noqa: E402
 
 
 def parse_args(argv=None):
@@ -72,25 +72,6 @@ def parse_args(argv=None):
                    help="only measure the training loss of the true geometry (rendered GT depth + true ego-motion) "
                         "and of a constant 8 m depth with the true motion, on the train scenes (no training)")
     return p.parse_args(argv)
-
-
-def resolved_config(path: str, profile: str) -> dict:
-    """The effective config as the Snakefile resolves it (``redsup.config.resolve`` with ``profile``)."""
-    import yaml
-
-    from redsup import config as rconfig
-
-    raw = yaml.safe_load(Path(path).read_text())
-    raw["profile"] = profile
-    return rconfig.resolve(raw)
-
-
-def project_seed(cfg: dict, dataset: str, mode: str, seed_index: int) -> int:
-    """The seed ``depth_train.py`` gives model ``<dataset>/<mode>[/seed<k>]``."""
-    seed = int(cfg["seed"]) + zlib.crc32(f"{dataset}/{mode}".encode()) % 100000
-    if seed_index:
-        seed += zlib.crc32(f"{dataset}/{mode}/seed{seed_index}".encode()) % 100000
-    return seed
 
 
 def camera_poses(scene_dir: Path, camera: str) -> np.ndarray:
@@ -142,9 +123,9 @@ def main(argv=None) -> int:
     import torch
 
     from redsup.depth import data, evaluation, experiments, pipeline, systems, training
-    from redsup.depth.configs import split_of
+    from redsup.depth.configs import model_seed, split_of
 
-    cfg = resolved_config(args.config, args.profile)
+    cfg = rconfig.load(args.config, {"profile": args.profile})
     dcfg = cfg["depth"]
     if args.smoothness is not None:
         dcfg["loss"]["smoothness_weight"] = float(args.smoothness)
@@ -166,7 +147,8 @@ def main(argv=None) -> int:
         tcfg["decay_at"] = args.decay_at if len(args.decay_at) > 1 else args.decay_at[0]
     if args.flip is not None:
         tcfg["flip"] = bool(args.flip)
-    seed = args.seed if args.seed is not None else project_seed(cfg, ds, mode, args.seed_index)
+    model_id = f"{ds}/{mode}" + (f"/seed{args.seed_index}" if args.seed_index else "")
+    seed = args.seed if args.seed is not None else model_seed(cfg["seed"], model_id)   # as depth_train
     steps = int(tcfg["steps"])
 
     # ---- data: as depth_train.py (train scenes), plus the val scenes with their LiDAR depth
@@ -315,7 +297,7 @@ def main(argv=None) -> int:
                "summary": {k: v for k, v in summary.items() if k != "validation"},
                "val": val_rows, "steps": step_rows, "argv": sys.argv}
     stem = out / f"{args.tag}_seed{args.seed_index}"
-    stem.with_suffix(".json").write_text(json.dumps(result, indent=1, default=float))
+    Path(f"{stem}.json").write_text(json.dumps(result, indent=1, default=float))
     for rows, suffix in ((step_rows, "_steps.csv"), (val_rows, "_val.csv")):
         keys = list(dict.fromkeys(k for r in rows for k in r))
         with open(f"{stem}{suffix}", "w", newline="") as f:
@@ -339,7 +321,7 @@ def oracle(args) -> int:
     from redsup.depth.configs import split_of
 
     torch.set_num_threads(args.threads)
-    cfg = resolved_config(args.config, args.profile)
+    cfg = rconfig.load(args.config, {"profile": args.profile})
     spec, tcfg = cfg["datasets"][args.dataset], cfg["depth"]["train"]
     res = Path(args.results)
     scenes = split_of(sorted(p.name for p in (res / "raw" / args.dataset).iterdir()), "train")

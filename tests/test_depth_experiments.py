@@ -248,3 +248,13 @@ def test_seed_rows_are_averaged_with_their_spread(cfg):
         configs.parse_model("world_lyft/M/2")
     assert plan.rows(cfg, _scenes_of(cfg))["galteland_table4_4"][1][1].startswith("baseline_world_lyft-MD_frontback_")
     assert configs.seed_models("world_lyft/MD", 2)[1] == "world_lyft/MD/seed1"
+
+
+def test_model_seed_is_the_training_seed_of_a_model_id():
+    """Seed index 0: base + crc32("<dataset>/<mode>") mod 1e5 (crc32(b"world_kitti/M") = ...72623); index k adds
+    crc32 of the whole id mod 1e5 (b"world_kitti/M/seed2": ...22484). A change here retrains every model."""
+    assert configs.model_seed(2026, "world_kitti/M") == 2026 + 72623
+    assert configs.model_seed(2026, "world_kitti/M/seed2") == 2026 + 72623 + 22484
+    assert configs.model_seed(0, "world_kitti/M") == 72623
+    with pytest.raises(ValueError, match="not a depth model id"):
+        configs.model_seed(0, "world_kitti")

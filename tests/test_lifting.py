@@ -471,6 +471,10 @@ def test_checkpoint_round_trip_keeps_the_resolved_config(tmp_path):
         assert k == k2 and torch.equal(v, v2)
     with pytest.raises(ValueError, match="expected 'lidar_detector'"):
         checkpoint.load(path, "lidar_detector")
+    assert checkpoint.load(path, None)["kind"] == "lifting"   # any kind: the MLflow model export reads it so
+    (tmp_path / "junk.pt").write_bytes(b"not a checkpoint")
+    with pytest.raises(ValueError, match="junk.pt: not a readable checkpoint"):
+        checkpoint.load(tmp_path / "junk.pt", None)
 
 
 def test_network_with_position_input():

@@ -39,8 +39,8 @@ def save(path: str | Path, kind: str, modules: Mapping[str, nn.Module | Mapping]
     os.replace(tmp, path)
 
 
-def load(path: str | Path, kind: str) -> dict:
-    """The checkpoint dict of ``path`` (CPU tensors), checked to be of ``kind``."""
+def load(path: str | Path, kind: str | None) -> dict:
+    """The checkpoint dict of ``path`` (CPU tensors), checked to be of ``kind`` (None: any kind)."""
     path = Path(path)
     try:
         data = torch.load(path, map_location="cpu", weights_only=False)
@@ -48,6 +48,6 @@ def load(path: str | Path, kind: str) -> dict:
         raise ValueError(f"{path}: not a readable checkpoint ({type(exc).__name__}: {exc})") from exc
     if not isinstance(data, dict) or data.get("format") != FORMAT:
         raise ValueError(f"{path}: not a {FORMAT} checkpoint")
-    if data.get("kind") != kind:
+    if kind is not None and data.get("kind") != kind:
         raise ValueError(f"{path}: a {data.get('kind')!r} checkpoint, expected {kind!r}")
     return data

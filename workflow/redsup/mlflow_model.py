@@ -20,7 +20,7 @@ from typing import Any
 import torch
 from torch import nn
 
-from redsup.checkpoint import FORMAT
+from redsup import checkpoint as ckpt
 from redsup.runlog import RunRecord, flatten_params, plain
 
 FORBIDDEN = "/:.%\"'"   # characters MLflow does not allow in a model name
@@ -68,9 +68,7 @@ def log_model(run: RunRecord, module: nn.Module, checkpoint: str | Path, name: s
     name = "".join("-" if c in FORBIDDEN else c for c in str(name))
     folder = run.artifact_dir / "models" / name
     try:
-        data = torch.load(checkpoint, map_location="cpu", weights_only=False)
-        if not isinstance(data, dict) or data.get("format") != FORMAT:
-            raise ValueError(f"{checkpoint}: not a {FORMAT} checkpoint")
+        data = ckpt.load(checkpoint, None)   # kind and meta from the file of record, its format checked
         if folder.exists():
             shutil.rmtree(folder)
         folder.mkdir(parents=True)

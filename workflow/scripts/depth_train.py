@@ -4,12 +4,10 @@ import sys
 
 sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821  (log first)
 
-import zlib  # noqa: E402
-
 import torch  # noqa: E402
 
 from redsup.depth import checkpoint, data, experiments, systems, training  # noqa: E402
-from redsup.depth.configs import parse_model  # noqa: E402
+from redsup.depth.configs import model_seed, parse_model  # noqa: E402
 from redsup.depth.plan import model_parent  # noqa: E402
 from redsup.depth.experiments import loss_settings  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
@@ -23,8 +21,7 @@ dataset, mode, seed_index = parse_model(sm.wildcards.model)
 mode_cfg = cfg["modes"][mode]
 sources = list(mode_cfg["sources"])
 device = cfg["device"] if cfg["device"] != "auto" else ("cuda" if torch.cuda.is_available() else "cpu")
-seed = int(sm.config["seed"]) + zlib.crc32(f"{dataset}/{mode}".encode()) % 100000  # seed index 0
-seed += 0 if seed_index == 0 else zlib.crc32(sm.wildcards.model.encode()) % 100000
+seed = model_seed(sm.config["seed"], sm.wildcards.model)
 model_cfg, tcfg = systems.train_settings(cfg, dataset, mode)
 params = {"dataset": dataset, "mode": mode, "seed_index": seed_index, "sources": sources,
           "cameras": mode_cfg["cameras"], "seed": seed, "device": device, "model": model_cfg, "loss": cfg["loss"],

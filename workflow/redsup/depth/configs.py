@@ -12,6 +12,7 @@ MLflow child run (parent: the first table that uses it, tagged with every table 
 from __future__ import annotations
 
 import re
+import zlib
 from collections.abc import Mapping, Sequence as Seq
 from dataclasses import asdict, dataclass, field
 
@@ -136,6 +137,14 @@ def parse_model(model: str) -> tuple[str, str, int]:
     if len(parts) == 3 and re.fullmatch(r"seed[1-9][0-9]*", parts[2]):
         return parts[0], parts[1], int(parts[2][4:])
     raise ValueError(f"not a depth model id: {model!r} (<dataset>/<mode>[/seed<k>])")
+
+
+def model_seed(base_seed: int, model: str) -> int:
+    """The training seed of model id ``<dataset>/<mode>[/seed<k>]`` under the workflow's ``seed``: seed index 0
+    is ``base_seed`` + crc32("<dataset>/<mode>") mod 1e5; index k >= 1 adds crc32 of the whole id mod 1e5."""
+    dataset, mode, seed_index = parse_model(model)
+    seed = int(base_seed) + zlib.crc32(f"{dataset}/{mode}".encode()) % 100000
+    return seed if seed_index == 0 else seed + zlib.crc32(model.encode()) % 100000
 
 
 def n_seeds(depth_cfg: Mapping, model: str) -> int:

@@ -114,7 +114,8 @@ def self_supervised_loss(target: torch.Tensor, warped: torch.Tensor | Sequence[S
     # One photometric-error call per (scale, source): the chunks stay in the CPU caches (one call on the whole
     # (S*N*B, 3, H, W) stack is several times slower on CPU for the same arithmetic).
     # unbind, not indexing: the backward of warped_t[s, k] fills a zero tensor of the whole stack per chunk
-    # (S * N full-size fills and adds per step, 17 % of a CPU training step); unbind's backward is one stack.
+    # (S * N full-size fills and adds per step); unbind's backward is one stack (5 % less CPU per default-profile
+    # step, benchmarks/ab_depth_step.py).
     stats = ssim_stats(target)
     chunks = [scale.unbind(0) for scale in warped_t.unbind(0)]
     reproj = torch.stack([torch.cat([photometric_error(chunks[s][k], target, alpha, stats) for k in range(n_src)], 1)
