@@ -19,7 +19,7 @@ import torch
 import yaml
 
 from redsup import config as config_mod
-from redsup.depth import experiments, systems
+from redsup.depth import configs, experiments, systems
 from timing import median_time
 
 
@@ -31,7 +31,7 @@ def _batch(b: int, h: int, w: int, device) -> dict:
 
 def bench(cfg: dict, mode: str, repeats: int, device: str) -> dict:
     d = cfg["depth"]
-    model, train = systems.train_settings(d, "world_kitti", mode)
+    model, train = configs.train_settings(d, "world_kitti", mode)
     res = cfg["datasets"]["world_kitti"]["resize"]
     h, w = systems.input_size((res["height"], res["width"]), float(model.get("input_scale", 1.0)))
     torch.manual_seed(0)

@@ -67,6 +67,9 @@ def parse_args(argv=None):
     p.add_argument("--init-disparity", type=float, default=None, help="initial sigmoid output (depth.modes.*)")
     p.add_argument("--val-every", type=int, default=50)
     p.add_argument("--threads", type=int, default=1)
+    p.add_argument("--dump", action="store_true",
+                   help="also write <tag>_seed<k>_val_depth.npz: the final model's val predictions (median-scaled "
+                        "per frame), the LiDAR depth and the images, and <tag>_seed<k>_val_depth.png")
     p.add_argument("--summarize", action="store_true", help="only print the table of the runs in --out")
     p.add_argument("--oracle", action="store_true",
                    help="only measure the training loss of the true geometry (rendered GT depth + true ego-motion) "
@@ -123,7 +126,7 @@ def main(argv=None) -> int:
     import torch
 
     from redsup.depth import data, evaluation, experiments, pipeline, systems, training
-    from redsup.depth.configs import model_seed, split_of
+    from redsup.depth.configs import model_seed, split_of, train_settings
 
     cfg = rconfig.load(args.config, {"profile": args.profile})
     dcfg = cfg["depth"]
@@ -132,7 +135,7 @@ def main(argv=None) -> int:
     ds, mode = args.dataset, args.mode
     mode_cfg = dcfg["modes"][mode]
     sources = list(mode_cfg["sources"])
-    model_cfg, tcfg = systems.train_settings(dcfg, ds, mode)
+    model_cfg, tcfg = train_settings(dcfg, ds, mode)
     if args.width is not None:
         model_cfg["base_channels"] = args.width
     if args.input_scale is not None:
@@ -304,9 +307,54 @@ def main(argv=None) -> int:
             wr = csv.DictWriter(f, keys)
             wr.writeheader()
             wr.writerows(rows)
+    if args.dump:
+        dump_val(models, meta, val, dcfg["eval"], f"{stem}_val_depth")
     print(f"done {args.tag} seed{args.seed_index}: final abs_rel {final['abs_rel']:.4f} a1 {final['a1']:.3f}; "
           f"best {best['abs_rel']:.4f} @ {best['step']}; wall {wall:.0f} s -> {stem}.json", flush=True)
     return 0
+
+
+def dump_val(models, meta, val, ev, stem: str) -> None:
+    """The final model's val depth, median-scaled per frame on the LiDAR pixels, beside the LiDAR depth: an npz,
+    and a PNG (image / prediction / LiDAR-vs-prediction error) of every 5th frame; prints the error split by
+    LiDAR depth bin and the signed log error (over- vs under-estimation)."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from redsup.depth import evaluation, experiments
+    images, preds, gts = [], [], []
+    for es in val:
+        depth = experiments.predict_sequence(models, es.seq.images, meta)
+        for im, d, g in zip(es.seq.images, depth, es.gt):
+            d = experiments.resize_depth(d, g.shape)
+            m = evaluation.valid_mask(g, min_depth=ev["min_depth"], max_depth=ev["max_depth"], crop=ev["crop"])
+            if m.any():
+                d = d * np.median(g[m]) / np.median(d[m])
+            images.append(im), preds.append(d), gts.append(np.where(m, g, 0.0))
+    np.savez_compressed(f"{stem}.npz", images=np.stack(images), pred=np.stack(preds), gt=np.stack(gts))
+    pred, gt = np.stack(preds), np.stack(gts)
+    m = gt > 0
+    err = np.abs(pred[m] - gt[m]) / gt[m]
+    sl = np.log(pred[m] / gt[m])
+    for lo, hi in ((0, 10), (10, 20), (20, 40), (40, 80)):
+        b = (gt[m] >= lo) & (gt[m] < hi)
+        if b.any():
+            print(f"GT {lo}-{hi} m: {b.mean():.2f} of pixels, abs_rel {err[b].mean():.3f}, mean log(pred/gt) "
+                  f"{sl[b].mean():+.3f}", flush=True)
+    rows = list(range(0, len(images), 5))
+    fig, ax = plt.subplots(len(rows), 3, figsize=(12, 1.4 * len(rows)), squeeze=False)
+    for r, i in enumerate(rows):
+        ax[r, 0].imshow(images[i])
+        ax[r, 1].imshow(1.0 / np.maximum(preds[i], 0.1), cmap="magma")
+        e = np.where(gts[i] > 0, np.log(np.maximum(preds[i], 1e-3) / np.maximum(gts[i], 1e-3)), np.nan)
+        ax[r, 2].imshow(e, cmap="coolwarm", vmin=-1, vmax=1)
+        for a in ax[r]:
+            a.axis("off")
+    ax[0, 2].set_title("log(pred / LiDAR): red = too far")
+    fig.tight_layout()
+    fig.savefig(f"{stem}.png", dpi=80)
+    plt.close(fig)
 
 
 def oracle(args) -> int:

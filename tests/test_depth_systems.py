@@ -5,7 +5,7 @@ import pytest
 import torch
 
 from redsup.depth import checkpoint, data, experiments, featdepth, manydepth, networks, reporting, systems, training
-from redsup.depth.configs import EvalSpec, Row
+from redsup.depth.configs import EvalSpec, Row, train_settings
 
 torch.set_num_threads(1)
 
@@ -119,14 +119,29 @@ def test_train_settings_override_per_system():
                      "M": {"sources": ["prev", "next"], "cameras": ["cam_front"]}},
            "systems": {"manydepth": {"base_channels": 8, "n_bins": 16, "steps": 300, "epochs": 20}},
            "models": [{"dataset": "d", "mode": "MD", "steps": 50}]}
-    model, train = systems.train_settings(cfg, "d", "MD")
+    model, train = train_settings(cfg, "d", "MD")
     assert model["system"] == "manydepth" and model["base_channels"] == 8 and model["n_bins"] == 16
     assert train["steps"] == 50 and train["epochs"] == 20 and train["batch_size"] == 4
-    model, train = systems.train_settings(cfg, "d", "M")
+    model, train = train_settings(cfg, "d", "M")
     assert model["system"] == "monodepth2" and model["base_channels"] == 16 and train["epochs"] == 0
     assert systems.input_size((64, 208), 0.5) == (32, 104)
     assert isinstance(systems.build({**model, "height": 1, "width": 1, "mode": "M"})["depth_encoder"],
                       networks.ResNetEncoder)
+
+
+def test_train_settings_mode_recipe_between_base_and_model_entry():
+    """A mode's input_scale / steps override depth.model / depth.train; a models entry's steps override the mode's."""
+    cfg = {"model": {"base_channels": 16, "num_scales": 4, "min_depth": 0.1, "max_depth": 100.0},
+           "train": {"steps": 600, "batch_size": 4, "lr": 1e-4, "decay_at": 0.75, "gamma": 0.1},
+           "modes": {"M": {"sources": ["prev", "next"], "cameras": ["cam_front"], "input_scale": 0.5, "steps": 2400},
+                     "S": {"sources": ["stereo"], "cameras": ["cam_front"]}},
+           "models": [{"dataset": "a", "mode": "M"}, {"dataset": "b", "mode": "M", "steps": 30},
+                      {"dataset": "a", "mode": "S"}]}
+    model, train = train_settings(cfg, "a", "M")
+    assert model["input_scale"] == 0.5 and train["steps"] == 2400
+    assert train_settings(cfg, "b", "M")[1]["steps"] == 30
+    model, train = train_settings(cfg, "a", "S")
+    assert model.get("input_scale", 1.0) == 1.0 and train["steps"] == 600
 
 
 def test_figures_draw_without_validation_history(tmp_path):

@@ -7,7 +7,7 @@ sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821
 import torch  # noqa: E402
 
 from redsup.depth import checkpoint, data, experiments, systems, training  # noqa: E402
-from redsup.depth.configs import model_seed, parse_model  # noqa: E402
+from redsup.depth.configs import model_seed, parse_model, train_settings  # noqa: E402
 from redsup.depth.plan import model_parent  # noqa: E402
 from redsup.depth.experiments import loss_settings  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
@@ -22,7 +22,7 @@ mode_cfg = cfg["modes"][mode]
 sources = list(mode_cfg["sources"])
 device = cfg["device"] if cfg["device"] != "auto" else ("cuda" if torch.cuda.is_available() else "cpu")
 seed = model_seed(sm.config["seed"], sm.wildcards.model)
-model_cfg, tcfg = systems.train_settings(cfg, dataset, mode)
+model_cfg, tcfg = train_settings(cfg, dataset, mode)
 params = {"dataset": dataset, "mode": mode, "seed_index": seed_index, "sources": sources,
           "cameras": mode_cfg["cameras"], "seed": seed, "device": device, "model": model_cfg, "loss": cfg["loss"],
           "train": tcfg}

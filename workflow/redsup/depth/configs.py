@@ -120,6 +120,36 @@ def system_of(depth_cfg: Mapping, mode: str) -> str:
     return depth_cfg["modes"][mode].get("system", "monodepth2")
 
 
+def system_settings(depth_cfg: Mapping, system: str) -> dict:
+    """``depth.systems.<system>`` (empty for monodepth2: its settings are depth.model / depth.train)."""
+    return dict(depth_cfg.get("systems", {}).get(system, {})) if system != "monodepth2" else {}
+
+
+SYSTEM_MODEL_KEYS = ("base_channels", "n_bins", "range_init", "range_momentum", "static_prob", "zero_prob",
+                     "consistency_weight", "freeze_at", "alpha", "beta", "feature_weight", "input_scale")
+SYSTEM_TRAIN_KEYS = ("steps", "batch_size", "lr", "decay_at", "gamma", "epochs")
+
+
+def train_settings(depth_cfg: Mapping, dataset: str, mode: str) -> tuple[dict, dict]:
+    """(model settings, training settings) of one model: ``depth.model`` / ``depth.train`` overridden by the
+    system's ``depth.systems.<system>``, then by the mode's ``input_scale`` / ``steps`` and then by the model
+    entry's ``steps``. The model settings name the ``system``; the training settings hold ``epochs``
+    (validation passes; 0 = none) for the systems that select their best epoch on the validation split."""
+    system = system_of(depth_cfg, mode)
+    sset = system_settings(depth_cfg, system)
+    mode_cfg = depth_cfg["modes"][mode]
+    model = {**depth_cfg["model"], "system": system, **{k: sset[k] for k in SYSTEM_MODEL_KEYS if k in sset}}
+    model["init_disparity"] = mode_cfg.get("init_disparity", depth_cfg["model"].get("init_disparity"))
+    if "input_scale" in mode_cfg:
+        model["input_scale"] = float(mode_cfg["input_scale"])
+    train = {**depth_cfg["train"], "epochs": 0, **{k: sset[k] for k in SYSTEM_TRAIN_KEYS if k in sset}}
+    steps = next((m["steps"] for m in depth_cfg["models"]
+                  if m["dataset"] == dataset and m["mode"] == mode and m.get("steps")), mode_cfg.get("steps"))
+    if steps:
+        train["steps"] = int(steps)
+    return model, train
+
+
 def mode_sources(depth_cfg: Mapping, mode: str) -> tuple[str, ...]:
     return tuple(depth_cfg["modes"][mode]["sources"])
 

@@ -29,7 +29,7 @@ from dataclasses import replace
 
 from redsup.depth.configs import (METRIC_COLUMNS, EvalSpec, Row, eval_inputs, groups_label, lr_label,
                                   mode_sources, n_seeds, parse_model, plan as plan_runs, seed_models, system_of,
-                                  trained_models)
+                                  train_settings, trained_models)
 
 STAGES = ("depth", "galteland")
 ROW_FIELDS = ("kind", "dataset", "mode", "test", "split", "frames", "sources", "groups", "lr", "steps", "step",
@@ -288,20 +288,32 @@ def _system_recipe(config: Mapping, system: str) -> str:
             f"prepared size{extra}, {steps} steps of batch {batch}{val}")
 
 
+def _monodepth2_sizes(depth_cfg: Mapping, models: Sequence[str]) -> str:
+    """Input size and steps of the table's Monodepth2 models, grouped: "M: input 0.5 x the prepared size, 2400
+    steps; S, MS: input 1 x ..., 600 steps" (every trained Monodepth2 model when ``models`` is empty)."""
+    ids = [parse_model(m)[:2] for m in models] or [(m["dataset"], m["mode"]) for m in depth_cfg["models"]]
+    groups: dict[tuple[float, int], list[str]] = {}
+    for dataset, mode in ids:
+        if system_of(depth_cfg, mode) != "monodepth2":
+            continue
+        model, train = train_settings(depth_cfg, dataset, mode)
+        modes = groups.setdefault((float(model.get("input_scale", 1.0)), int(train["steps"])), [])
+        if mode not in modes:
+            modes.append(mode)
+    return "; ".join(f"{', '.join(modes)}: input {scale:g} x the prepared size, {steps} steps"
+                     for (scale, steps), modes in groups.items())
+
+
 def table_note(config: Mapping, table_cfg: Mapping, info: Mapping, seeds: int = 1, models: Sequence[str] = (),
                timing: Mapping | None = None) -> str:
     """Caption note: the training recipe of each system in the rows, the table's own note, the device of the
     FPS column, the frames per comparison group, skips."""
     d = config["depth"]
     used = list(dict.fromkeys(system_of(d, parse_model(m)[1]) for m in models)) or ["monodepth2"]
-    overrides = sorted({int(m["steps"]) for m in d["models"] if "steps" in m})
-    steps = f"{d['train']['steps']} steps"
-    if overrides:
-        steps += f" ({'/'.join(map(str, overrides))} for some models)"
     recipes = [_system_recipe(config, s) for s in used if s != "monodepth2"]
     if "monodepth2" in used:
-        recipes.insert(0, f"ResNet-18 width {d['model']['base_channels']}, {steps} of batch {d['train']['batch_size']}, "
-                          f"flips {'on' if d['train']['flip'] else 'off'}")
+        recipes.insert(0, f"ResNet-18 width {d['model']['base_channels']}, batch {d['train']['batch_size']}, flips "
+                          f"{'on' if d['train']['flip'] else 'off'}, {_monodepth2_sizes(d, models)}")
     parts = [f"Profile {config.get('profile')}: embedded world, networks trained from scratch "
              f"({'; '.join(recipes)}), no ImageNet weights"]
     if table_cfg.get("fps_column") and timing:

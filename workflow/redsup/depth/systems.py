@@ -17,15 +17,9 @@ import torch
 from torch import nn
 
 from redsup.depth import featdepth, manydepth, networks, pipeline
-from redsup.depth.configs import system_of
 
 SYSTEMS = ("monodepth2", "manydepth", "featdepth")
 BRANCHES = {"manydepth": ("", "teacher"), "monodepth2": ("",), "featdepth": ("",)}
-
-
-def settings(depth_cfg: Mapping, system: str) -> dict:
-    """``depth.systems.<system>`` (empty for monodepth2: its settings are depth.model / depth.train)."""
-    return dict(depth_cfg.get("systems", {}).get(system, {})) if system != "monodepth2" else {}
 
 
 def build(meta: Mapping) -> nn.ModuleDict:
@@ -82,28 +76,6 @@ def predict_depth(models: Mapping[str, nn.Module], meta: Mapping, target: torch.
                 raise ValueError("Manydepth needs the intrinsics K at test time")
             return manydepth.predict_depth(models, target, prev, K, lo, hi)
         return pipeline.predict_depth(models, target, lo, hi)
-
-
-SYSTEM_MODEL_KEYS = ("base_channels", "n_bins", "range_init", "range_momentum", "static_prob", "zero_prob",
-                     "consistency_weight", "freeze_at", "alpha", "beta", "feature_weight", "input_scale")
-SYSTEM_TRAIN_KEYS = ("steps", "batch_size", "lr", "decay_at", "gamma", "epochs")
-
-
-def train_settings(depth_cfg: Mapping, dataset: str, mode: str) -> tuple[dict, dict]:
-    """(model settings, training settings) of one model: ``depth.model`` / ``depth.train`` overridden by the
-    system's ``depth.systems.<system>`` and then by the model entry's ``steps``. The model settings name the
-    ``system``; the training settings hold ``epochs`` (validation passes; 0 = none) for the systems that
-    select their best epoch on the validation split."""
-    system = system_of(depth_cfg, mode)
-    sset = settings(depth_cfg, system)
-    model = {**depth_cfg["model"], "system": system, **{k: sset[k] for k in SYSTEM_MODEL_KEYS if k in sset}}
-    init = depth_cfg["modes"][mode].get("init_disparity", depth_cfg["model"].get("init_disparity"))
-    model["init_disparity"] = init
-    train = {**depth_cfg["train"], "epochs": 0, **{k: sset[k] for k in SYSTEM_TRAIN_KEYS if k in sset}}
-    steps = next((m.get("steps") for m in depth_cfg["models"] if m["dataset"] == dataset and m["mode"] == mode), None)
-    if steps:
-        train["steps"] = int(steps)
-    return model, train
 
 
 def input_size(size: tuple[int, int], scale: float) -> tuple[int, int]:
