@@ -30,6 +30,8 @@ def test_read_benchmark_and_job_metrics(tmp_path):
                                                           "job_cpu_s": 20.0}
     (tmp_path / "b.tsv").write_text(HEADER + "0.4\t0:00:00\tNA\tNA\tNA\tNA\tNA\tNA\tNA\t0.3\n")
     assert benchmarks.job_metrics(tmp_path / "b.tsv") == {"job_wall_s": 0.4, "job_cpu_s": 0.3}  # no NaN metric
+    _bench(tmp_path / "z.tsv", 0.9, "0.00", 0.5)  # a job shorter than the sampler's first look: RSS not measured
+    assert benchmarks.job_metrics(tmp_path / "z.tsv") == {"job_wall_s": 0.9, "job_cpu_s": 0.5}
     (tmp_path / "c.tsv").write_text(HEADER)
     with pytest.raises(ValueError, match="c.tsv"):
         benchmarks.read_benchmark(tmp_path / "c.tsv")

@@ -49,9 +49,11 @@ def benchmark_path(record_path: str | Path, rule: str, *, runs_root: str | Path 
 
 
 def job_metrics(path: str | Path) -> dict[str, float]:
-    """MLflow metrics of one job from its benchmark file (finite values only)."""
+    """MLflow metrics of one job from its benchmark file (finite values only; a peak RSS of 0 is Snakemake's
+    sampler finding no process yet, in jobs shorter than its first sample: not measured, left out)."""
     values = read_benchmark(path)
-    return {metric: values[col] for col, metric in METRIC_NAMES.items() if math.isfinite(values[col])}
+    return {metric: values[col] for col, metric in METRIC_NAMES.items()
+            if math.isfinite(values[col]) and not (col == "max_rss" and values[col] <= 0)}
 
 
 def collect(root: str | Path, rule_stages: Mapping[str, str], exclude: tuple[str, ...] = ()) -> list[dict]:

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import os
+import threading
 from pathlib import Path
 
 import numpy as np
@@ -18,8 +19,11 @@ def save_npz_atomic(path: str | Path, **arrays: np.ndarray) -> None:
 
 
 def write_text_atomic(path: str | Path, text: str) -> None:
+    """Write ``text`` to a temporary sibling, then rename over ``path``: a reader sees the old or the new file,
+    never a partial one. The temporary name carries the process and thread, so concurrent writers of one
+    path do not share it."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".part")
+    tmp = path.with_name(f"{path.name}.{os.getpid()}.{threading.get_ident()}.part")
     tmp.write_text(text)
     os.replace(tmp, path)

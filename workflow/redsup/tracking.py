@@ -37,6 +37,8 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from redsup.fileio import write_text_atomic
+
 DEFAULT_TRACKING_URI = "sqlite:///results/mlflow.db"
 DEFAULT_ARTIFACT_ROOT = "results/mlartifacts"
 DEFAULT_EXPERIMENT_PREFIX = "redsup/"
@@ -177,7 +179,7 @@ def init_store(tracking_uri: str, plan: Mapping[str, Any], out_json: str | Path,
                 "parent_stages": parent_stages, "experiment_names": experiment_names}
     out_json = Path(out_json)
     out_json.parent.mkdir(parents=True, exist_ok=True)
-    out_json.write_text(json.dumps(registry, indent=2, sort_keys=True) + "\n")
+    write_text_atomic(out_json, json.dumps(registry, indent=2, sort_keys=True) + "\n")
     return registry
 
 
@@ -620,7 +622,7 @@ def _sync_records(tracking_uri, plan, runs_root: Path, out_json, *, artifact_roo
     registry.update({"imported": imported, "updated": updated, "deleted": deleted, "records": len(records),
                      "unreadable": unreadable, "parents_with_new_artifacts": parents_logged,
                      "parents_timed": timed})
-    Path(out_json).write_text(json.dumps(registry, indent=2, sort_keys=True) + "\n")
+    write_text_atomic(out_json, json.dumps(registry, indent=2, sort_keys=True) + "\n")
     return registry
 
 
