@@ -82,13 +82,14 @@ def camera_poses(scene_dir: Path, camera: str) -> np.ndarray:
     from redsup import sceneio
 
     poses = sceneio.read_poses(scene_dir / "ego_poses.txt")
-    extr = json.loads((scene_dir / "extrinsics.json").read_text())
-    return poses @ np.asarray(extr[camera], float)[None]
+    return poses @ sceneio.read_extrinsics(scene_dir / "extrinsics.json")[camera][None]
 
 
 def true_transform(Twc: np.ndarray, t: int, j: int) -> np.ndarray:
     """Target (frame t) -> source (frame j) camera transform: points of camera t into camera j."""
-    return np.linalg.inv(Twc[j]) @ Twc[t]
+    from redsup.geometry import invert_pose
+
+    return invert_pose(Twc[j]) @ Twc[t]
 
 
 def rot_angle_deg(R: np.ndarray) -> np.ndarray:

@@ -81,7 +81,7 @@ def test_checkpoint_roundtrip(tmp_path):
             "mode": "M", "sources": ["prev", "next"], "train": {"steps": 1}}
     path = tmp_path / "m" / "M.pt"
     checkpoint.save(path, models, meta)
-    assert path.exists() and not path.with_name("M.pt.part").exists()
+    assert path.exists() and not list(path.parent.glob("M.pt*.part"))
     loaded, meta2 = checkpoint.load(path)
     assert meta2 == meta and not loaded["depth_encoder"].training
     x = torch.rand(1, 3, H, W)

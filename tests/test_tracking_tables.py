@@ -4,6 +4,7 @@ metrics. Hand-made records and benchmark files, no workflow run."""
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 
 import pytest
@@ -32,6 +33,7 @@ def test_read_benchmark_and_job_metrics(tmp_path):
     assert benchmarks.job_metrics(tmp_path / "b.tsv") == {"job_wall_s": 0.4, "job_cpu_s": 0.3}  # no NaN metric
     _bench(tmp_path / "z.tsv", 0.9, "0.00", 0.5)  # a job shorter than the sampler's first look: RSS not measured
     assert benchmarks.job_metrics(tmp_path / "z.tsv") == {"job_wall_s": 0.9, "job_cpu_s": 0.5}
+    assert math.isnan(benchmarks.read_benchmark(tmp_path / "z.tsv")["max_rss"])
     (tmp_path / "c.tsv").write_text(HEADER)
     with pytest.raises(ValueError, match="c.tsv"):
         benchmarks.read_benchmark(tmp_path / "c.tsv")

@@ -36,8 +36,12 @@ def read_benchmark(path: str | Path) -> dict[str, float]:
     if not rows:
         raise ValueError(f"{path}: benchmark file without a measurement line")
     row = rows[-1]
-    return {key: _number(row.get(key)) for key in ("s", "max_rss", "max_vms", "max_uss", "max_pss", "io_in",
-                                                   "io_out", "mean_load", "cpu_time")}
+    values = {key: _number(row.get(key)) for key in ("s", "io_in", "io_out", "mean_load", "cpu_time")}
+    # a memory peak of 0 is Snakemake's sampler finding no process yet (a job shorter than its first sample):
+    # not measured, like "NA"
+    values.update({key: v if v > 0 else math.nan
+                   for key, v in ((k, _number(row.get(k))) for k in ("max_rss", "max_vms", "max_uss", "max_pss"))})
+    return values
 
 
 def benchmark_path(record_path: str | Path, rule: str, *, runs_root: str | Path = RUNS_ROOT,
@@ -49,11 +53,9 @@ def benchmark_path(record_path: str | Path, rule: str, *, runs_root: str | Path 
 
 
 def job_metrics(path: str | Path) -> dict[str, float]:
-    """MLflow metrics of one job from its benchmark file (finite values only; a peak RSS of 0 is Snakemake's
-    sampler finding no process yet, in jobs shorter than its first sample: not measured, left out)."""
+    """MLflow metrics of one job from its benchmark file (measured, finite values only)."""
     values = read_benchmark(path)
-    return {metric: values[col] for col, metric in METRIC_NAMES.items()
-            if math.isfinite(values[col]) and not (col == "max_rss" and values[col] <= 0)}
+    return {metric: values[col] for col, metric in METRIC_NAMES.items() if math.isfinite(values[col])}
 
 
 def collect(root: str | Path, rule_stages: Mapping[str, str], exclude: tuple[str, ...] = ()) -> list[dict]:

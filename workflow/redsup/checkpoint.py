@@ -6,7 +6,7 @@ A checkpoint is one ``torch.save`` dict::
      "state": {module name: state dict}, "config": <the resolved workflow configuration of the job>,
      "meta": {what the stage needs to rebuild and use the networks: sizes, ranges, training summary}}
 
-``save`` writes atomically (``<path>.part`` then rename: a failed job leaves nothing); ``load`` checks the
+``save`` writes atomically (``redsup.fileio.part_path`` then rename: a failed job leaves nothing); ``load`` checks the
 format and kind and names the file in every error. `redsup.mlflow_model` makes a checkpoint's network an MLflow model.
 """
 from __future__ import annotations
@@ -19,6 +19,7 @@ from typing import Any
 import torch
 from torch import nn
 
+from redsup.fileio import part_path
 from redsup.runlog import plain
 
 FORMAT = "redsup-checkpoint/1"
@@ -33,7 +34,7 @@ def save(path: str | Path, kind: str, modules: Mapping[str, nn.Module | Mapping]
     for name, m in modules.items():
         sd = m.state_dict() if isinstance(m, nn.Module) else m
         state[name] = {k: v.detach().cpu() if torch.is_tensor(v) else v for k, v in sd.items()}
-    tmp = path.with_name(path.name + ".part")
+    tmp = part_path(path)
     torch.save({"format": FORMAT, "kind": kind, "state": state, "config": plain(config),
                 "meta": plain(dict(meta or {}))}, tmp)
     os.replace(tmp, path)

@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from redsup.config import config_hash
+from redsup.fileio import write_text_atomic
 
 MAX_PARAM_LENGTH = 6000  # MLflow rejects longer param values
 
@@ -146,9 +147,7 @@ class RunRecord:
 
     # persistence -----------------------------------------------------------------------------
     def write(self) -> None:
-        tmp = self.path.with_name(self.path.name + ".part")
-        tmp.write_text(json.dumps(self.data, indent=1, default=str))
-        os.replace(tmp, self.path)
+        write_text_atomic(self.path, json.dumps(self.data, indent=1, default=str))
 
 
 DATASET_KINDS = ("prepared", "raw")  # results/<kind>/<dataset>/...: what enters a run as an MLflow dataset

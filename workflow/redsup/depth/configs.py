@@ -272,7 +272,7 @@ def train_inputs(config: Mapping, dataset: str, mode: str, scenes: Seq[str]) -> 
     if "stereo" in mode_cfg["sources"]:
         files["stereo"] = [f"results/prepared/{dataset}/{s}/cam_front_right.npz" for s in scenes]
     system = config["depth"]["modes"][mode].get("system", "monodepth2")
-    epochs = config["depth"].get("systems", {}).get(system, {}).get("epochs", 0) if system != "monodepth2" else 0
+    epochs = system_settings(config["depth"], system).get("epochs", 0)
     val = split_of(all_scenes, "val")
     if epochs and val:  # validation passes (best epoch on val): the val scenes' images and LiDAR depth
         cam = config["depth"]["eval"]["camera"]

@@ -29,7 +29,7 @@ from dataclasses import replace
 
 from redsup.depth.configs import (METRIC_COLUMNS, EvalSpec, Row, eval_inputs, groups_label, lr_label,
                                   mode_sources, n_seeds, parse_model, plan as plan_runs, seed_models, system_of,
-                                  train_settings, trained_models)
+                                  system_settings, train_settings, trained_models)
 
 STAGES = ("depth", "galteland")
 ROW_FIELDS = ("kind", "dataset", "mode", "test", "split", "frames", "sources", "groups", "lr", "steps", "step",
@@ -277,7 +277,7 @@ SYSTEM_NAMES = {"manydepth": "Manydepth", "featdepth": "Feature Depth"}
 
 def _system_recipe(config: Mapping, system: str) -> str:
     d = config["depth"]
-    s = d.get("systems", {}).get(system, {})
+    s = system_settings(d, system)
     width = s.get("base_channels", d["model"]["base_channels"])
     steps, batch = s.get("steps", d["train"]["steps"]), s.get("batch_size", d["train"]["batch_size"])
     epochs = int(s.get("epochs", 0))
