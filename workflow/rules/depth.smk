@@ -1,6 +1,7 @@
 # Self-supervised depth, test-time instance adaptation, Galteland's tables (McCraith ch. 4).
 #
-# train_depth    results/depth/models/{dataset}/{mode}[/seed{k}].pt one model (M, S, MS, M_frontback, ...) per seed
+# train_depth    results/depth/models/{dataset}/{mode}[/seed{k}].pt one model (M, S, MS, M_frontback, ...) per seed,
+#                and .json beside it: its meta (sizes, training summary, validation history) and configuration
 # predict_depth  results/depth/predictions/{dataset}/{mode}/{scene}.npz   raw network depth of every frame
 #                (the mode's model of calibration.model_dataset when set, else of the dataset)
 # depth_eval     results/depth/eval/{run}.json                      one configuration (a child run)
@@ -24,7 +25,8 @@ rule train_depth:
     input:
         unpack(lambda wc: depth_plan.train_files(config, wc.model, scenes_of)),
     output:
-        "results/depth/models/{model}.pt",
+        model="results/depth/models/{model}.pt",
+        meta="results/depth/models/{model}.json",
     log:
         "results/logs/depth/models/{model}.log",
         run="results/runs/depth/models/{model}.json",

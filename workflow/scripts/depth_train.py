@@ -4,13 +4,16 @@ import sys
 
 sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821  (log first)
 
+import json  # noqa: E402
+
 import torch  # noqa: E402
 
 from redsup.depth import checkpoint, data, experiments, systems, training  # noqa: E402
 from redsup.depth.configs import model_seed, parse_model, train_settings  # noqa: E402
 from redsup.depth.plan import model_parent  # noqa: E402
 from redsup.depth.experiments import loss_settings  # noqa: E402
-from redsup.runlog import child_run  # noqa: E402
+from redsup.fileio import write_text_atomic  # noqa: E402
+from redsup.runlog import child_run, plain  # noqa: E402
 from redsup.mlflow_model import log_model  # noqa: E402
 
 sm = snakemake  # noqa: F821
@@ -79,7 +82,8 @@ with child_run(sm.log.run, parent, f"train {sm.wildcards.model}", rule=sm.rule, 
         metric = seqs[0].extra["stereo_baseline_m"]
         meta.update(stereo_baseline=cfg["train"]["stereo_baseline"],
                     stereo_scale_factor=metric / cfg["train"]["stereo_baseline"])
-    checkpoint.save(sm.output[0], models, meta, sm.config)
-    log_model(run, models, sm.output[0], name=f"depth-{sm.wildcards.model}")   # the system's networks, for MLflow
+    checkpoint.save(sm.output.model, models, meta, sm.config)
+    write_text_atomic(sm.output.meta, json.dumps(plain({"meta": meta, "config": sm.config}), indent=1))
+    log_model(run, models, sm.output.model, name=f"depth-{sm.wildcards.model}")   # the system's networks, for MLflow
     run.log_metrics({k: float(v) for k, v in summary.items() if isinstance(v, (int, float))})
     print({k: v for k, v in summary.items() if k != "validation"})

@@ -115,20 +115,18 @@ def qualitative_frames(n_frames: int, count: int) -> list[int]:
 
 
 def draw(spec: Mapping, model_paths: Sequence[str], images_npz: str | None = None, names: Mapping | None = None):
-    """The figure of one spec from the trained checkpoints (and, qualitative, a prepared test scene's images)."""
-    from redsup.depth import checkpoint, data, experiments, systems
-
-    labels = list(spec.get("labels") or [])
-    loaded = [checkpoint.load(p) for p in model_paths]
-    if not labels:
-        system_names = {"manydepth": "Manydepth", "featdepth": "Feature Depth", "monodepth2": "Monodepth2"}
-        labels = [f"{system_names[meta.get('system', 'monodepth2')]} ({(names or {}).get(meta['dataset'], meta['dataset'])})"
-                  for _, meta in loaded]
-    title = str(spec.get("caption", ""))
+    """The figure of one spec: progression from the models' JSON sidecars (``<model>.json``: no torch), qualitative
+    from the trained checkpoints and a prepared test scene's images."""
     if spec["kind"] == "progression":
+        metas = [read_sidecar(p) for p in model_paths]
+        labels = figure_labels(spec, metas, names)
         runs = [(lab, meta.get("validation", []), int(meta.get("best_step", meta.get("steps", 0))))
-                for lab, (_, meta) in zip(labels, loaded)]
-        return progression(runs, title)
+                for lab, meta in zip(labels, metas)]
+        return progression(runs, str(spec.get("caption", "")))
+    from redsup.depth import checkpoint, data, experiments
+
+    loaded = [checkpoint.load(p) for p in model_paths]
+    labels = figure_labels(spec, [meta for _, meta in loaded], names)
     images, K = data.read_prepared(images_npz)
     frames = qualitative_frames(len(images), int(spec.get("frames", 3)))
     preds = []
@@ -139,4 +137,24 @@ def draw(spec: Mapping, model_paths: Sequence[str], images_npz: str | None = Non
             d = experiments.predict_frame(models, experiments.prediction_batch(seq, t, meta), meta)
             out.append(experiments.resize_depth(d, images.shape[1:3]))
         preds.append((lab, np.stack(out)))
-    return qualitative(images[frames], preds, title)
+    return qualitative(images[frames], preds, str(spec.get("caption", "")))
+
+
+def figure_labels(spec: Mapping, metas: Sequence[Mapping], names: Mapping | None = None) -> list[str]:
+    """The spec's labels, or "<system> (<dataset's display name>)" per model meta."""
+    if spec.get("labels"):
+        return [str(x) for x in spec["labels"]]
+    system_names = {"manydepth": "Manydepth", "featdepth": "Feature Depth", "monodepth2": "Monodepth2"}
+    return [f"{system_names[m.get('system', 'monodepth2')]} ({(names or {}).get(m['dataset'], m['dataset'])})"
+            for m in metas]
+
+
+def read_sidecar(path: str) -> dict:
+    """The ``meta`` of a depth model's JSON sidecar (written beside its checkpoint by ``train_depth``)."""
+    import json
+
+    try:
+        data = json.loads(open(path).read())
+        return dict(data["meta"])
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ValueError(f"{path}: not a depth model sidecar ({type(exc).__name__}: {exc})") from exc

@@ -354,11 +354,13 @@ def figures(config: Mapping, scenes_of) -> list[str]:
 
 
 def figure_files(config: Mapping, figure: str, scenes_of) -> dict:
-    """Inputs of ``galteland_figure``: the checkpoints (seed 0) and, qualitative, the first test scene's images."""
+    """Inputs of ``galteland_figure`` (seed 0 of each model): progression, the models' JSON sidecars (their
+    validation history, read without torch); qualitative, the checkpoints and the first test scene's images."""
     from redsup.depth.galteland_figures import figure_models
 
     spec = config["depth"]["figures"][figure]
-    files: dict = {"models": [f"results/depth/models/{m}.pt" for m in figure_models(spec)]}
+    suffix = ".json" if spec["kind"] == "progression" else ".pt"
+    files: dict = {"models": [f"results/depth/models/{m}{suffix}" for m in figure_models(spec)]}
     if spec["kind"] == "qualitative":
         from redsup.depth.configs import split_of
 
