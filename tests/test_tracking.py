@@ -13,6 +13,7 @@ import time
 import urllib.request
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 pytest.importorskip("mlflow")
@@ -78,6 +79,9 @@ def store(tmp_path_factory):
             run.log_figure(fig, "curve")
             plt.close(fig)
             run.log_table(pd.DataFrame({"x": [1, 2]}), "values")
+            image = np.zeros((2, 3, 3), np.uint8)
+            image[0, 0] = (255, 0, 0)                 # RGB red, stored by OpenCV in BGR order
+            assert run.log_image(image, "overlay") == "overlay.png"
             run.log_parent_artifact(table)
 
         with pytest.raises(ValueError, match="boom"):
@@ -196,7 +200,11 @@ def test_finished_child_params_metrics_steps_artifacts(store):
     assert [(m.step, m.value) for m in sorted(history, key=lambda m: m.step)] == [(0, 1.0), (1, 0.5), (2, 0.25)]
     assert len(client.get_metric_history(ok_id, "abs_rel_curve")) == 3
     artifacts = {a.path for a in client.list_artifacts(ok_id)}
-    assert {"config.yaml", "curve.png", "values.csv"} <= artifacts
+    assert {"config.yaml", "curve.png", "values.csv", "overlay.png"} <= artifacts
+    import cv2
+
+    overlay = cv2.imread(client.download_artifacts(ok_id, "overlay.png", str(store["root"])))
+    assert overlay.shape == (2, 3, 3) and tuple(overlay[0, 0]) == (0, 0, 255) and overlay[1].max() == 0   # BGR
     import yaml
 
     cfg = yaml.safe_load(Path(client.download_artifacts(ok_id, "config.yaml", str(store["root"]))).read_text())

@@ -47,6 +47,23 @@ def test_prepared_camera_files(built):
         assert images.std() > 10  # textured, not flat colours
 
 
+def test_detection_overlay_artifact(built):
+    """Each detection job logs its busiest frame: the camera image at 2x under a 36-pixel caption band, with the
+    matched boxes drawn in yellow (the stand-in detector matches most of its masks to a ground-truth car)."""
+    import cv2
+
+    from redsup import sceneio
+
+    record = json.loads((built / "results/runs/prepared/world_kitti/test_000/detections_cityscapes.json").read_text())
+    (png,) = [a for a, _ in record["artifacts"] if "detections_cityscapes_frame" in a]
+    image = cv2.cvtColor(cv2.imread(str(built / png)), cv2.COLOR_BGR2RGB)
+    scene = built / "results/raw/world_kitti/test_000"
+    camera = sceneio.read_image(scene / "cam_front" / sceneio.frame_name(0, "png"))
+    assert image.shape == (2 * camera.shape[0] + 36, 2 * camera.shape[1], 3)
+    assert (image[:36] == 255).mean() > 0.8                                   # the caption band
+    assert np.all(image[36:] == (255, 255, 0), axis=-1).sum() > 20           # yellow box outlines
+
+
 def test_mlflow_store_has_parents_and_children(built):
     registry = json.loads((built / "results" / "mlflow" / "registry.json").read_text())
     assert {"data_preparation", "world", "mccraith_ch3_table1"} <= set(registry["parents"])

@@ -121,6 +121,16 @@ class RunRecord:
         self.data["artifacts"].append([str(self._stash(name)), None])
         return name
 
+    def log_image(self, image, name: str) -> str:
+        """An RGB uint8 image (H x W x 3) saved as a PNG artifact (`name` gets `.png` if it has no suffix)."""
+        import cv2
+
+        name = name if Path(name).suffix else f"{name}.png"
+        if not cv2.imwrite(str(self._stash(name)), cv2.cvtColor(image, cv2.COLOR_RGB2BGR)):
+            raise OSError(f"{self._stash(name)}: the image could not be written")
+        self.data["artifacts"].append([str(self._stash(name)), None])
+        return name
+
     def log_artifact(self, path: str | Path, artifact_path: str | None = None) -> None:
         """A file (or folder) that the sync copies into the run's artifacts (referenced, not copied now)."""
         self.data["artifacts"].append([str(path), artifact_path])

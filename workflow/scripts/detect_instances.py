@@ -3,8 +3,6 @@ import sys
 
 sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821
 
-import matplotlib.pyplot as plt  # noqa: E402
-
 from redsup.prep.detections import write_detections  # noqa: E402
 from redsup.prep.figures import busiest_frame, detection_overlay  # noqa: E402
 from redsup.prep.masks_io import load_detections  # noqa: E402
@@ -25,6 +23,4 @@ with child_run(sm.log.run, "data_preparation", f"detections {name}", rule=sm.rul
     print(summary)
     detections = load_detections(sm.output[0])
     frame = busiest_frame(detections)
-    fig = detection_overlay(sm.input.scene, detections, frame)
-    run.log_figure(fig, f"detections_{level}_frame{frame:06d}.png")
-    plt.close(fig)
+    run.log_image(detection_overlay(sm.input.scene, detections, frame), f"detections_{level}_frame{frame:06d}.png")

@@ -1,17 +1,20 @@
-"""Diagnostic figures of the preparation stages (logged to MLflow by the Snakemake scripts)."""
+"""Diagnostic images of the preparation stages (logged to MLflow by the Snakemake scripts), drawn with OpenCV:
+the preparation jobs already use it, and matplotlib's start-up would double a detection job's time."""
 from __future__ import annotations
 
 from pathlib import Path
 
-import matplotlib
+import cv2
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from redsup import geometry, sceneio
+from redsup.prep import masks_io
+from redsup.prep.detections import LIDAR
 
-from redsup import geometry, sceneio  # noqa: E402
-from redsup.prep import masks_io  # noqa: E402
-from redsup.prep.detections import LIDAR  # noqa: E402
+MATCHED = (255, 255, 0)      # RGB: yellow box = matched to a ground-truth car
+UNMATCHED = (255, 0, 255)    # magenta = a false positive or a merged mask
+INLIER = (0, 255, 0)         # L_m point inside the matched ground-truth box
+OUTLIER = (255, 0, 0)        # ... outside it
 
 
 def busiest_frame(d: dict) -> int:
@@ -21,8 +24,9 @@ def busiest_frame(d: dict) -> int:
     return int(np.bincount(d["frame"]).argmax())
 
 
-def detection_overlay(scene_dir: str | Path, d: dict, frame: int):
-    """Camera image with the frame's masks, boxes and scores, and the L_m points coloured by the
+def detection_overlay(scene_dir: str | Path, d: dict, frame: int, scale: int = 2) -> np.ndarray:
+    """RGB uint8 image (``scale`` x the camera's size, with a caption band): the frame's masks blended over the
+    camera image, boxes and scores (yellow matched, magenta unmatched), and the L_m points coloured by the
     ground-truth inlier flag (green inside the matched box, red outside)."""
     scene_dir = Path(scene_dir)
     camera = str(d["camera"])
@@ -32,28 +36,28 @@ def detection_overlay(scene_dir: str | Path, d: dict, frame: int):
     T = geometry.invert_pose(ext[camera]) @ ext[LIDAR]
     overlay = image.astype(np.float32) / 255.0
     rng = np.random.default_rng(0)
-    fig, ax = plt.subplots(figsize=(12, 12 * image.shape[0] / image.shape[1] + 0.6), dpi=100)
     ids = np.flatnonzero(d["frame"] == frame)
     for i in ids:
-        colour = rng.uniform(0.2, 1.0, 3)
         m = masks_io.mask_of(d, i)
-        overlay[m] = 0.5 * overlay[m] + 0.5 * colour
-    ax.imshow(overlay)
+        overlay[m] = 0.5 * overlay[m] + 0.5 * rng.uniform(0.2, 1.0, 3)
+    h, w = image.shape[:2]
+    canvas = cv2.resize(np.round(overlay * 255).astype(np.uint8), (w * scale, h * scale),
+                        interpolation=cv2.INTER_NEAREST)
     for i in ids:
-        x1, y1, x2, y2 = d["box"][i]
-        matched = d["matched_track"][i] >= 0
-        ax.add_patch(plt.Rectangle((x1, y1), x2 - x1, y2 - y1, fill=False, lw=1,
-                                   ec="yellow" if matched else "magenta"))
-        ax.text(x1, y1 - 2, f"{d['score'][i]:.2f}", color="yellow" if matched else "magenta", fontsize=7)
+        x1, y1, x2, y2 = (float(v) * scale for v in d["box"][i])
+        colour = MATCHED if d["matched_track"][i] >= 0 else UNMATCHED
+        cv2.rectangle(canvas, (int(round(x1)), int(round(y1))), (int(round(x2)), int(round(y2))), colour, 1)
+        cv2.putText(canvas, f"{d['score'][i]:.2f}", (int(round(x1)), max(int(round(y1)) - 3, 8)),
+                    cv2.FONT_HERSHEY_SIMPLEX, 0.35, colour, 1, cv2.LINE_AA)
         pts = masks_io.points_of(d, i)
         if len(pts):
             uv, _ = geometry.project(K, geometry.transform_points(T, pts[:, :3].astype(np.float64)))
             inl = masks_io.inliers_of(d, i)
-            ax.scatter(uv[inl, 0], uv[inl, 1], s=2, c="lime", linewidths=0)
-            ax.scatter(uv[~inl, 0], uv[~inl, 1], s=2, c="red", linewidths=0)
-    ax.set_title(f"{scene_dir.name} frame {frame}: {len(ids)} detections ({d['level']}); "
-                 "yellow = matched, magenta = unmatched; L_m points green = in gt box, red = outlier",
-                 fontsize=8)
-    ax.set_axis_off()
-    fig.tight_layout()
-    return fig
+            for (u, v), ok in zip(np.round(uv * scale).astype(int), inl):
+                if 0 <= u < w * scale and 0 <= v < h * scale:
+                    cv2.circle(canvas, (int(u), int(v)), 1, INLIER if ok else OUTLIER, -1)
+    band = np.full((36, canvas.shape[1], 3), 255, np.uint8)
+    for k, line in enumerate((f"{scene_dir.name} frame {frame}: {len(ids)} detections ({d['level']})",
+                              "yellow = matched, magenta = unmatched; L_m points green = in gt box, red = outlier")):
+        cv2.putText(band, line, (4, 14 + 16 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1, cv2.LINE_AA)
+    return np.concatenate([band, canvas])
