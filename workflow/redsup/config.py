@@ -12,8 +12,9 @@ import json
 from pathlib import Path
 from typing import Any
 
-import jsonschema
 import yaml
+
+from redsup.fileio import yaml_dump, yaml_load
 
 SCHEMA_DIR = Path(__file__).resolve().parents[1] / "schemas"
 PROFILES = ("tiny", "default", "paper")
@@ -30,21 +31,23 @@ def load_schema(schema_dir: Path = SCHEMA_DIR) -> dict:
         if isinstance(node, dict):
             ref = node.get("$ref")
             if isinstance(ref, str) and ref.endswith(".yaml"):
-                return inline(yaml.safe_load((schema_dir / ref).read_text()))
+                return inline(yaml_load((schema_dir / ref).read_text()))
             return {k: inline(v) for k, v in node.items()}
         if isinstance(node, list):
             return [inline(v) for v in node]
         return node
 
-    return inline(yaml.safe_load((schema_dir / "config.schema.yaml").read_text()))
+    return inline(yaml_load((schema_dir / "config.schema.yaml").read_text()))
 
 
-def _path(error: jsonschema.ValidationError) -> str:
+def _path(error) -> str:   # a jsonschema.ValidationError
     return ".".join(str(p) for p in error.absolute_path) or "<top level>"
 
 
 def validate(cfg: dict, schema: dict, where: str = "config.yaml") -> None:
     """Raise ConfigError listing every schema violation with its key path."""
+    import jsonschema   # here: every job imports this module (config_hash) and never validates
+
     validator = jsonschema.Draft202012Validator(schema)
     errors = sorted(validator.iter_errors(cfg), key=lambda e: list(e.absolute_path))
     if errors:
@@ -97,7 +100,7 @@ def load(path: str | Path, overrides: dict | None = None) -> dict:
     """Read a YAML config file, apply command-line style overrides, resolve the profile."""
     path = Path(path)
     try:
-        raw = yaml.safe_load(path.read_text())
+        raw = yaml_load(path.read_text())
     except yaml.YAMLError as exc:
         raise ConfigError(f"{path}: not valid YAML: {exc}") from exc
     return resolve(deep_merge(raw, overrides or {}))
@@ -111,4 +114,4 @@ def config_hash(cfg: dict) -> str:
 
 def save(cfg: dict, path: str | Path) -> None:
     """Write the config beside a checkpoint or metrics file."""
-    Path(path).write_text(yaml.safe_dump(cfg, sort_keys=True))
+    Path(path).write_text(yaml_dump(cfg))

@@ -1,5 +1,6 @@
 """Atomic output writing: a failed job never leaves a partial file behind, and a reader sees the old or the new
-file, never a partial one."""
+file, never a partial one. And YAML through libyaml where PyYAML has it (every job writes its resolved
+configuration, every table job reads tables.yaml: the pure-Python emitter and parser took 0.2-0.3 s each time)."""
 from __future__ import annotations
 
 import os
@@ -35,3 +36,17 @@ def write_text_atomic(path: str | Path, text: str) -> None:
     tmp = part_path(path)
     tmp.write_text(text)
     os.replace(tmp, path)
+
+
+def yaml_load(text: str):
+    """``yaml.safe_load`` (the same safe constructor and resolver), with libyaml's parser when available."""
+    import yaml
+
+    return yaml.load(text, Loader=getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+
+
+def yaml_dump(obj) -> str:
+    """``yaml.safe_dump(obj, sort_keys=True)``, with libyaml's emitter when available."""
+    import yaml
+
+    return yaml.dump(obj, Dumper=getattr(yaml, "CSafeDumper", yaml.SafeDumper), sort_keys=True)

@@ -32,7 +32,7 @@ from pathlib import Path
 from typing import Any
 
 from redsup.config import config_hash
-from redsup.fileio import write_text_atomic
+from redsup.fileio import write_text_atomic, yaml_dump
 
 MAX_PARAM_LENGTH = 6000  # MLflow rejects longer param values
 
@@ -243,8 +243,6 @@ def child_run(record_path: str | Path, parent: str, run_name: str, *, rule: str,
     artifact `config.yaml`. The record is written provisionally at the start (status RUNNING, with
     ``job`` = {uid, pid, host} that identifies this attempt of the job) and finally with its real status.
     """
-    import yaml
-
     path = Path(record_path)
     path.parent.mkdir(parents=True, exist_ok=True)
     wildcards = {str(k): str(v) for k, v in dict(wildcards or {}).items()}
@@ -261,7 +259,7 @@ def child_run(record_path: str | Path, parent: str, run_name: str, *, rule: str,
     if record.artifact_dir.exists():
         shutil.rmtree(record.artifact_dir)
     record.log_params(params or {})
-    record.log_text(yaml.safe_dump(plain(config), sort_keys=True), "config.yaml")
+    record.log_text(yaml_dump(plain(config)), "config.yaml")
     record.write()
     killed: RunKilled | None = None
     try:

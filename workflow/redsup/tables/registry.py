@@ -12,7 +12,7 @@ import re
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import yaml
+from redsup.fileio import yaml_load
 
 if TYPE_CHECKING:  # pandas is imported where it is used: the stage plans read this module in every job
     import pandas as pd
@@ -28,7 +28,7 @@ CHECK_TYPES = ("order", "best", "close", "range")
 # ------------------------------------------------------------------------------------- loading
 @functools.lru_cache(maxsize=4)
 def _load_registry(path: str) -> dict:
-    reg = yaml.safe_load(Path(path).read_text())
+    reg = yaml_load(Path(path).read_text())
     for table_id, entry in reg["tables"].items():
         entry.setdefault("claims", [])
         entry.setdefault("headline_metric", None)
