@@ -99,7 +99,8 @@ def test_every_table_filter_returns_exactly_its_rows_runs(built, store):
 
 def test_runs_appear_live_while_snakemake_runs(tiny, tmp_path):
     """A second process sees finished runs in the store before the Snakemake invocation ends (live sync every
-    second here), and the end leaves no RUNNING run: six preparation jobs of one scene, one at a time."""
+    second here), and the end leaves no RUNNING run: six preparation jobs of each of two scenes, one at a time
+    (about half a second to a second each: one scene's six finished before a live sync could show one)."""
     import shutil
     import sqlite3
     import subprocess
@@ -107,12 +108,17 @@ def test_runs_appear_live_while_snakemake_runs(tiny, tmp_path):
 
     from conftest import SNAKEMAKE
 
-    scene = next(p for p in sorted((tiny / "results" / "raw" / "world_kitti").iterdir()) if p.name.startswith("test"))
+    scenes = [p for p in sorted((tiny / "results" / "raw" / "world_kitti").iterdir())
+              if p.name.startswith(("test", "val"))][:2]
+    assert len(scenes) == 2
     work = tmp_path / "live"
-    shutil.copytree(scene, work / "results" / "raw" / "world_kitti" / scene.name)
-    prepared = f"results/prepared/world_kitti/{scene.name}"
-    targets = [f"{prepared}/{name}" for name in ("cam_front_depth.npz", "cam_front_right_depth.npz", "cam_front.npz",
-                                                "road.npz", "detections_coco.npz", "detections_cityscapes.npz")]
+    targets = []
+    for scene in scenes:
+        shutil.copytree(scene, work / "results" / "raw" / "world_kitti" / scene.name)
+        prepared = f"results/prepared/world_kitti/{scene.name}"
+        targets += [f"{prepared}/{name}" for name in ("cam_front_depth.npz", "cam_front_right_depth.npz",
+                                                       "cam_front.npz", "road.npz", "detections_coco.npz",
+                                                       "detections_cityscapes.npz")]
     live = tmp_path / "live.yaml"  # extends config.yaml: sync every second, up to half the time
     live.write_text(yaml.safe_dump({"mlflow": {"tracking_uri": "sqlite:///results/mlflow.db",
                                                "artifact_root": "results/mlartifacts", "experiment_prefix": "redsup/",
