@@ -157,3 +157,30 @@ def test_figures_draw_without_validation_history(tmp_path):
     specs = {"a": {"kind": "progression", "models": ["d/MD"]},
              "b": {"kind": "qualitative", "models": ["d/MD"], "test": "e"}}
     assert gf.available_figures(specs, ["d/MD"], {"e": 0}) == ["a"]
+
+
+def test_progression_figure_reads_the_json_sidecar_without_torch(tmp_path):
+    """The progression figures read a model's meta from the JSON beside its checkpoint; a missing or foreign
+    file is named in the error; the labels are the spec's or "<system> (<dataset's display name>)"."""
+    import json
+    import subprocess
+    import sys
+
+    from redsup.depth import galteland_figures as gf
+
+    history = [{"step": s, "train_loss": 1.0 / s, "abs_rel": 0.3 - 0.01 * s} for s in (2, 4)]
+    side = tmp_path / "MD.json"
+    side.write_text(json.dumps({"meta": {"system": "manydepth", "dataset": "world_kitti", "validation": history,
+                                         "best_step": 4}, "config": {"profile": "tiny"}}))
+    assert gf.read_sidecar(str(side))["best_step"] == 4
+    assert gf.figure_labels({}, [gf.read_sidecar(str(side))], {"world_kitti": "KITTI-like"}) == [
+        "Manydepth (KITTI-like)"]
+    assert gf.figure_labels({"labels": ["x"]}, [{}]) == ["x"]
+    (tmp_path / "bad.json").write_text("{}")
+    with pytest.raises(ValueError, match="bad.json: not a depth model sidecar"):
+        gf.read_sidecar(str(tmp_path / "bad.json"))
+    script = ("import sys; from redsup.depth import galteland_figures as gf; "
+              f"gf.draw({{'kind': 'progression', 'models': ['d/MD']}}, [{str(side)!r}]).savefig({str(tmp_path / 'p.png')!r}); "
+              "print('torch' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "False" and (tmp_path / "p.png").stat().st_size > 1000
