@@ -152,9 +152,10 @@ def figure_labels(spec: Mapping, metas: Sequence[Mapping], names: Mapping | None
 def read_sidecar(path: str) -> dict:
     """The ``meta`` of a depth model's JSON sidecar (written beside its checkpoint by ``train_depth``)."""
     import json
+    from pathlib import Path
 
     try:
-        data = json.loads(open(path).read())
+        data = json.loads(Path(path).read_text())
         return dict(data["meta"])
     except (OSError, ValueError, KeyError, TypeError) as exc:
         raise ValueError(f"{path}: not a depth model sidecar ({type(exc).__name__}: {exc})") from exc
