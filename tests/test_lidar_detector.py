@@ -486,3 +486,23 @@ def test_one_cycle_adamw_matches_torch(steps):
         assert torch.allclose(a.weight, b.weight, atol=1e-7, rtol=1e-6) and torch.allclose(a.bias, b.bias, atol=1e-7)
     assert torch.equal(extra_a, extra_b)                                       # never had a gradient
     assert mine.lr == pytest.approx(sched.get_last_lr()[0], rel=1e-12)
+
+
+def test_bev_image_puts_points_and_boxes_where_the_grid_says():
+    from redsup.lidar_detector.figures import bev_image, bev_pixels
+
+    grid = GridSpec(x_range=(0.0, 20.0), y_range=(-5.0, 5.0), pillar=0.5, stride=2)
+    # 10 px/m: x 0..20 m -> columns 0..200, y +5..-5 m -> rows 0..100 (y up)
+    assert np.allclose(bev_pixels([[0.0, 5.0], [20.0, -5.0], [3.0, 1.0]], grid, 10.0),
+                       [[0, 0], [200, 100], [30, 40]])
+    box = np.array([[10.0, 0.0, 0.0, 4.0, 2.0, 1.5, 0.0]])        # 4 x 2 m, facing +x, centre at (100, 50) px
+    img = bev_image(np.array([[3.05, 1.05, 0.0]]), box, np.zeros((0, 7)), np.zeros(0), grid, "t")
+    assert img.shape == (36 + 100, 200, 3) and img.dtype == np.uint8
+    canvas = img[36:]
+    assert tuple(canvas[39, 30]) == (150, 150, 150)                 # the point, grey
+    assert canvas[40, 80:121, 1].min() < 200 and canvas[40, 80:121, 0].max() < 60   # the left side y=+1 m, green
+    assert canvas[45:56, 100:120].min() < 200                        # centre-to-front line
+    assert (canvas[20:30, 150:190] == 255).all()                     # nothing elsewhere
+    faded = bev_image(np.zeros((0, 3)), np.zeros((0, 7)), box, np.array([0.15]), grid, "t")[36:]
+    strong = bev_image(np.zeros((0, 3)), np.zeros((0, 7)), box, np.array([1.0]), grid, "t")[36:]
+    assert strong[40, 80:121].sum() < faded[40, 80:121].sum()        # a low score draws paler

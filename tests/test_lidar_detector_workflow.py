@@ -4,6 +4,7 @@ import json
 import math
 from pathlib import Path
 
+import cv2
 import numpy as np
 import pandas as pd
 import pytest
@@ -51,7 +52,8 @@ def test_every_configuration_trained_once_per_seed_with_curves(built, cfg):
             assert record["status"] == "FINISHED" and record["parent"] in TABLES
             curves = {m[0] for m in record["metrics"] if m[2] > 0}
             assert {"train/loss", "train/heatmap", "train/yaw"} <= curves
-            assert any(a[0].endswith("curves.png") for a in record["artifacts"])
+            bev = [a[0] for a in record["artifacts"] if a[0].endswith("bev_test_frame.png")]
+            assert len(bev) == 1 and cv2.imread(bev[0]).shape[2] == 3   # drawn with OpenCV, BGR on disk
 
 
 def test_tables_have_paper_values_and_scores(built, cfg):

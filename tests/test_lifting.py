@@ -488,3 +488,40 @@ def test_network_with_position_input():
     assert net(b.points, b.mask, ctx)["yaw_logits"].shape == (1, 8)
     with pytest.raises(ValueError, match="context"):
         net(b.points, b.mask)
+
+
+def test_read_tracks_maps_detection_rows_to_track_ids(tmp_path):
+    p = tmp_path / "tracks3d_coco.csv"
+    p.write_text("detection,frame,track,cx,cy,cz,n_points\n0,0,5,1.0,2.0,0.5,40\n3,1,5,1.1,2.0,0.5,38\n")
+    assert D.read_tracks(p, 5).tolist() == [5, -1, -1, 5, -1]          # untracked detections: -1
+    assert D.read_tracks(None, 2).tolist() == [-1, -1]
+    (tmp_path / "empty.csv").write_text("detection,frame,track,cx,cy,cz,n_points\n")
+    assert D.read_tracks(tmp_path / "empty.csv", 2).tolist() == [-1, -1]
+    with pytest.raises(ValueError, match="tracks3d_coco.csv: detection index 3 but the detections file has 3 rows"):
+        D.read_tracks(p, 3)
+    (tmp_path / "bad.csv").write_text("detection,frame\n0,0\n")
+    with pytest.raises(ValueError, match="bad.csv: no column track"):
+        D.read_tracks(tmp_path / "bad.csv", 2)
+    (tmp_path / "nan.csv").write_text("detection,track\n0,x\n")
+    with pytest.raises(ValueError, match="nan.csv: a detection or track value is not an integer"):
+        D.read_tracks(tmp_path / "nan.csv", 2)
+
+
+def test_template_file_round_trip_and_spec_check(tmp_path, tmpl):
+    """rule template_field's file gives back the same field; a file of another spec is refused by name."""
+    path = tmp_path / "lifting.npz"
+    T.save_template(path, tmpl)
+    back = T.load_template(path, T.TemplateSpec(voxel=0.1, margin=1.0))
+    assert torch.equal(back.field, tmpl.field) and np.array_equal(back.points, tmpl.points)
+    assert np.array_equal(back.origin, tmpl.origin) and back.voxel == tmpl.voxel and back.spec == tmpl.spec
+    pts = np.array([[[0.3, 2.0, 0.1], [1.9, 0.0, 0.0]]])
+    assert np.array_equal(T.distance_to_template(back, pts, np.zeros((1, 3)), np.zeros(1)),
+                          T.distance_to_template(tmpl, pts, np.zeros((1, 3)), np.zeros(1)))
+    with pytest.raises(ValueError, match=r"lifting.npz: built for another template \(voxel 0.1 != 0.15\)"):
+        T.load_template(path, T.TemplateSpec(voxel=0.15, margin=1.0))
+    (tmp_path / "bad.npz").write_bytes(b"not a zip")
+    with pytest.raises(ValueError, match="bad.npz: not a template file"):
+        T.load_template(tmp_path / "bad.npz", tmpl.spec)
+    # the two stages' config sections
+    assert T.spec_from_config({"template": {"voxel": 0.1, "margin": 1.0}}) == tmpl.spec
+    assert T.spec_from_config({"template_voxel": 0.15}) == T.TemplateSpec(voxel=0.15)

@@ -40,6 +40,7 @@ rule lidar_detector_train:
     input:
         train="results/lidar_detector/data/train.npz",
         test="results/lidar_detector/data/test.npz",
+        template="results/det3d/template/lidar_detector.npz",
     output:
         metrics="results/lidar_detector/metrics/{conf}/seed{seed}.json",
         model="results/lidar_detector/models/{conf}/seed{seed}.pt",

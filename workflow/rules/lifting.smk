@@ -4,6 +4,8 @@
 #                 configuration trained with one seed index (a child run): train on the train + long scenes,
 #                 lift and evaluate the test scenes
 # lifting_labels  results/lifting/labels/{conf}/seed{seed}.npz   a run's boxes on the training detections (Table IV (iii))
+# template_field  results/det3d/template/{stage}.npz   the template car's distance field of a stage (lifting, and
+#                 lidar_detector for ch. 7), built once instead of in every training job
 # The tables mccraith_ch6_table{1..4} are built by rule table (tables.smk) from redsup.lifting.plan: the
 # configurations (`lifting.runs`), seeds (`lifting.seeds`) and rows (`lifting.tables.<id>.rows`) are data.
 import redsup.lifting.plan as lift_plan
@@ -14,9 +16,29 @@ LIFT_CONFS = list(LIFT["runs"])
 LIFT_SEEDS = [str(int(k)) for k in LIFT["seeds"]]
 
 
+rule template_field:
+    output:
+        "results/det3d/template/{stage}.npz",
+    log:
+        "results/logs/det3d/template/{stage}.log",
+    benchmark:
+        "results/benchmarks/template_field/det3d/template/{stage}.tsv",
+    wildcard_constraints:
+        stage="lifting|lidar_detector",
+    threads: 1
+    resources:
+        mem_mb=2000,
+        runtime=10,
+    conda:
+        ENVS["lifting"]
+    script:
+        "../scripts/template_field.py"
+
+
 rule lifting_run:
     input:
         unpack(lambda wc: lift_plan.run_inputs(LIFT, scenes_of(LIFT["dataset"]), wc.conf, int(wc.seed))),
+        template="results/det3d/template/lifting.npz",
     output:
         metrics="results/lifting/metrics/{conf}/seed{seed}.json",
         info="results/lifting/info/{conf}/seed{seed}.json",
@@ -42,6 +64,7 @@ rule lifting_run:
 rule lifting_labels:
     input:
         unpack(lambda wc: lift_plan.labels_inputs(LIFT, scenes_of(LIFT["dataset"]), wc.conf, int(wc.seed))),
+        template="results/det3d/template/lifting.npz",
     output:
         "results/lifting/labels/{conf}/seed{seed}.npz",
     log:

@@ -10,12 +10,12 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 from redsup import checkpoint  # noqa: E402
-from redsup.det3d.template import TemplateSpec, build_template  # noqa: E402
+from redsup.det3d.template import load_template, spec_from_config  # noqa: E402
 from redsup.fileio import save_npz_atomic, write_text_atomic  # noqa: E402
 from redsup.lidar_detector.augment import AugmentSpec  # noqa: E402
 from redsup.lidar_detector.data import load_split  # noqa: E402
 from redsup.lidar_detector.evaluate import evaluate_split  # noqa: E402
-from redsup.lidar_detector.figures import bev_figure, curves_figure  # noqa: E402
+from redsup.lidar_detector.figures import bev_image  # noqa: E402
 from redsup.lidar_detector import plan  # noqa: E402
 from redsup.lidar_detector.grid import GridSpec  # noqa: E402
 from redsup.lidar_detector.postprocess import InferSpec  # noqa: E402
@@ -42,13 +42,10 @@ with child_run(sm.log.run, tables[0], name, rule=sm.rule, wildcards=dict(sm.wild
     train_data, test_data = load_split(sm.input.train), load_split(sm.input.test)
     print(f"{name}: {run_spec}; {train_data.n_frames} training frames, {test_data.n_frames} test frames; "
           f"data counts train {train_data.counts} test {test_data.counts}")
-    template = build_template(TemplateSpec(voxel=float(cfg["template_voxel"])))
-    history: dict = {}
+    template = load_template(sm.input.template, spec_from_config(cfg))
 
     def log(metrics, step):
         run.log_metrics(metrics, step=step)
-        for k, v in metrics.items():
-            history.setdefault(k, []).append((step, v))
         print(f"step {step}: " + ", ".join(f"{k[6:]} {v:.4g}" for k, v in metrics.items()))
 
     model, summary = train(train_data, run_spec, grid, train_spec, AugmentSpec.from_config(cfg["augment"]), template,
@@ -70,9 +67,8 @@ with child_run(sm.log.run, tables[0], name, rule=sm.rule, wildcards=dict(sm.wild
                     boxes=np.concatenate([d.boxes for d in dets]) if dets else np.zeros((0, 7)),
                     bbox=np.concatenate([d.bbox for d in dets]) if dets else np.zeros((0, 4)),
                     score=np.concatenate([d.score for d in dets]) if dets else np.zeros(0))
-    run.log_figure(curves_figure(history, f"{name}: training curves"), "curves.png")
     best = int(np.argmax([len(test_data.gt_boxes(f)) for f in range(test_data.n_frames)]))
-    run.log_figure(bev_figure(test_data.points(best), test_data.supervised_boxes(best, 1), dets[best].boxes,
-                              dets[best].score, grid, f"{name}: test frame {best} (green gt seen by the camera, "
-                              "red detections)"), "bev_test_frame.png")
+    run.log_image(bev_image(test_data.points(best), test_data.supervised_boxes(best, 1), dets[best].boxes,
+                            dets[best].score, grid, f"{name}: test frame {best} (green: gt seen by the camera, "
+                            "red: detections)"), "bev_test_frame.png")
     write_text_atomic(sm.output.metrics, json.dumps(metrics, indent=1, sort_keys=True) + "\n")

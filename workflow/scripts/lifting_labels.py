@@ -9,6 +9,7 @@ import torch  # noqa: E402
 from redsup.fileio import save_npz_atomic  # noqa: E402
 from redsup.lifting import plan  # noqa: E402
 from redsup.lifting.pipeline import load_model, make_labels, resolve_device, scene_inputs  # noqa: E402
+from redsup.det3d.template import load_template, spec_from_config  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
 
 sm = snakemake  # noqa: F821
@@ -23,7 +24,8 @@ scenes = scene_inputs(sm.input.train_scenes, sm.input.train_detections, sm.input
 with child_run(sm.log.run, tables[0], f"labels_{run_name}", rule=sm.rule, wildcards=dict(sm.wildcards),
                config=sm.config, params={"run": spec, "tables": tables}) as run:
     model = load_model(sm.input.model, resolve_device(cfg["device"]))
-    labels = make_labels(model, spec, cfg, scenes, seed=plan.training_seed(sm.config, seed_index))
+    labels = make_labels(model, spec, cfg, scenes, seed=plan.training_seed(sm.config, seed_index),
+                         template=load_template(sm.input.template, spec_from_config(cfg)))
     save_npz_atomic(sm.output[0], **labels)
     run.log_metrics({"labels": float(len(labels["box"]))})
     print(f"{len(labels['box'])} labels from {len(scenes)} scenes")

@@ -11,6 +11,7 @@ import torch  # noqa: E402
 from redsup.fileio import write_text_atomic  # noqa: E402
 from redsup.lifting import plan  # noqa: E402
 from redsup.lifting.pipeline import run_configuration, save_model, scene_inputs  # noqa: E402
+from redsup.det3d.template import load_template, spec_from_config  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
 from redsup.mlflow_model import log_model  # noqa: E402
 
@@ -31,7 +32,8 @@ with child_run(sm.log.run, tables[0], run_name, rule=sm.rule, wildcards=dict(sm.
                        "network": cfg["network"], "max_points": cfg["max_points"]}) as run:
     model, metrics, info = run_configuration(spec, cfg, train, test, seed=seed, labels_path=labels,
                                              log=run.log_metric, camera=sm.config["detection"]["camera"],
-                                             min_depth=sm.config["detection"]["points"]["min_depth"])
+                                             min_depth=sm.config["detection"]["points"]["min_depth"],
+                                             template=load_template(sm.input.template, spec_from_config(cfg)))
     run.log_metrics(metrics)
     run.log_metrics(info)
     save_model(model, spec, sm.config, sm.output.model, {"configuration": conf, "seed": seed})

@@ -123,6 +123,47 @@ def build_template(spec: TemplateSpec = TemplateSpec(), workers: int = 1) -> Tem
     return Template(spec, pts, field, origin, float(spec.voxel))
 
 
+def spec_from_config(section) -> TemplateSpec:
+    """The template of a stage's config section: ``lifting`` (``template: {voxel, margin}``) or
+    ``lidar_detector`` (``template_voxel``); the car itself is always the default `TemplateSpec`."""
+    if "template" in section:
+        return TemplateSpec(voxel=float(section["template"]["voxel"]), margin=float(section["template"]["margin"]))
+    return TemplateSpec(voxel=float(section["template_voxel"]))
+
+
+def save_template(path, template: Template) -> None:
+    """The template (surface points, distance field, grid) and its spec as one npz, written atomically: built
+    once per stage by rule ``template_field`` instead of in every training job (the k-d tree's import alone
+    is half a second)."""
+    import json
+    from dataclasses import asdict
+
+    from redsup.fileio import save_npz_atomic
+
+    save_npz_atomic(path, points=template.points, field=template.field.numpy(), origin=template.origin,
+                    voxel=np.float64(template.voxel), spec=np.array(json.dumps(asdict(template.spec), sort_keys=True)))
+
+
+def load_template(path, spec: TemplateSpec) -> Template:
+    """A template written by `save_template`; it must have been built from ``spec`` (the caller's config),
+    else a ValueError names the file and the differing fields."""
+    import json
+    from dataclasses import asdict
+
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            saved = json.loads(str(z["spec"]))
+            points, field, origin, voxel = z["points"], z["field"], z["origin"], float(z["voxel"])
+    except (OSError, KeyError, ValueError) as exc:
+        raise ValueError(f"{path}: not a template file ({type(exc).__name__}: {exc})") from None
+    want = asdict(spec)
+    diff = sorted(k for k in set(want) | set(saved) if want.get(k) != saved.get(k))
+    if diff:
+        raise ValueError(f"{path}: built for another template ({', '.join(f'{k} {saved.get(k)} != {want.get(k)}' for k in diff)}); "
+                         "rebuild it (rule template_field)")
+    return Template(spec, points, torch.from_numpy(np.ascontiguousarray(field, dtype=np.float32)), origin, voxel)
+
+
 def _rotate_into_template(points: torch.Tensor, translation: torch.Tensor, yaw: torch.Tensor) -> torch.Tensor:
     """Points (..., P, 3) in the template frame of poses (translation (..., 3), yaw (...)): R(-yaw)(p - t)."""
     rel = points - translation.unsqueeze(-2)

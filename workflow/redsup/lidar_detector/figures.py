@@ -1,50 +1,51 @@
-"""Figures of a training run: loss curves and one bird's-eye view of test detections."""
+"""The bird's-eye view of one test frame of a training run, drawn with OpenCV (matplotlib's start-up would add a
+second to every training job; the training curves are MLflow metrics with their steps, charted by its UI)."""
 from __future__ import annotations
 
-import matplotlib
+import cv2
+import numpy as np
 
-matplotlib.use("Agg")
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+from redsup.det3d.boxes import bev_corners
+from redsup.lidar_detector.grid import GridSpec
 
-from redsup.det3d.boxes import bev_corners  # noqa: E402
-from redsup.lidar_detector.grid import GridSpec  # noqa: E402
-
-
-def curves_figure(history: dict[str, list[tuple[int, float]]], title: str):
-    """One panel per curve (`history[name] = [(step, value), ...]`)."""
-    names = [k for k in history if k != "train/lr"]
-    fig, axes = plt.subplots(1, max(1, len(names)), figsize=(3.2 * max(1, len(names)), 2.6), squeeze=False)
-    for ax, name in zip(axes[0], names):
-        steps, values = zip(*history[name]) if history[name] else ((), ())
-        ax.plot(steps, values)
-        ax.set_title(name.replace("train/", ""), fontsize=9)
-        ax.set_xlabel("step", fontsize=8)
-        ax.tick_params(labelsize=7)
-    fig.suptitle(title, fontsize=10)
-    fig.tight_layout()
-    return fig
+POINT = (150, 150, 150)   # RGB: LiDAR points grey
+GT = (0, 160, 0)          # ground-truth boxes green
+DET = (220, 0, 0)         # detections red, paler with lower score
 
 
-def bev_figure(points: np.ndarray, gt_boxes: np.ndarray, det_boxes: np.ndarray, det_scores: np.ndarray,
-               grid: GridSpec, title: str):
-    """LiDAR points (grey), ground-truth boxes (green) and detections (red, alpha = score) in BEV."""
-    fig, ax = plt.subplots(figsize=(7, 7 * (grid.y_range[1] - grid.y_range[0]) / (grid.x_range[1] - grid.x_range[0]) + 0.6))
-    ax.scatter(points[:, 0], points[:, 1], s=0.2, c="0.6")
-    for boxes, colour, alphas in ((gt_boxes, "tab:green", None), (det_boxes, "tab:red", det_scores)):
-        if len(boxes) == 0:
-            continue
-        for k, c in enumerate(bev_corners(boxes)):
-            loop = np.vstack([c, c[:1]])
-            a = 1.0 if alphas is None else float(np.clip(alphas[k], 0.15, 1.0))
-            ax.plot(loop[:, 0], loop[:, 1], color=colour, alpha=a, lw=1)
-            ax.plot([boxes[k, 0], (c[0, 0] + c[3, 0]) / 2], [boxes[k, 1], (c[0, 1] + c[3, 1]) / 2], color=colour,
-                    alpha=a, lw=1)
-    ax.set_xlim(*grid.x_range)
-    ax.set_ylim(*grid.y_range)
-    ax.set_aspect("equal")
-    ax.set_xlabel("x (m, forward)")
-    ax.set_ylabel("y (m, left)")
-    ax.set_title(title, fontsize=9)
-    fig.tight_layout()
-    return fig
+def bev_pixels(xy: np.ndarray, grid: GridSpec, px_per_m: float) -> np.ndarray:
+    """(N, 2) vehicle-frame x (forward), y (left) in metres -> (N, 2) pixel (column, row): x to the right, y up,
+    the grid's (x_min, y_max) corner at pixel (0, 0)."""
+    xy = np.asarray(xy, dtype=np.float64).reshape(-1, 2)
+    return np.stack([(xy[:, 0] - grid.x_range[0]) * px_per_m, (grid.y_range[1] - xy[:, 1]) * px_per_m], axis=1)
+
+
+def _faded(colour, alpha: float) -> tuple[int, int, int]:
+    return tuple(int(round(255 - alpha * (255 - c))) for c in colour)
+
+
+def bev_image(points: np.ndarray, gt_boxes: np.ndarray, det_boxes: np.ndarray, det_scores: np.ndarray,
+              grid: GridSpec, title: str, px_per_m: float = 10.0) -> np.ndarray:
+    """RGB uint8 image of the grid's area: LiDAR points (grey), ground-truth boxes (green) and detections (red,
+    faded towards white as the score falls to 0.15), each box with a line from its centre to its front, under
+    a caption band with ``title``."""
+    w = int(round((grid.x_range[1] - grid.x_range[0]) * px_per_m))
+    h = int(round((grid.y_range[1] - grid.y_range[0]) * px_per_m))
+    canvas = np.full((h, w, 3), 255, np.uint8)
+    uv = np.floor(bev_pixels(np.asarray(points)[:, :2], grid, px_per_m)).astype(int) if len(points) else np.zeros((0, 2), int)
+    keep = (uv[:, 0] >= 0) & (uv[:, 0] < w) & (uv[:, 1] >= 0) & (uv[:, 1] < h)
+    canvas[uv[keep, 1], uv[keep, 0]] = POINT
+    for boxes, colour, scores in ((gt_boxes, GT, None), (det_boxes, DET, det_scores)):
+        boxes = np.asarray(boxes, dtype=np.float64).reshape(-1, 7)
+        for k, corners in enumerate(bev_corners(boxes) if len(boxes) else []):
+            c = colour if scores is None else _faded(colour, float(np.clip(scores[k], 0.15, 1.0)))
+            poly = np.round(bev_pixels(corners, grid, px_per_m)).astype(np.int32)
+            cv2.polylines(canvas, [poly], True, c, 1, cv2.LINE_AA)
+            front = np.round(bev_pixels(np.stack([boxes[k, :2], (corners[0] + corners[3]) / 2]), grid,
+                                        px_per_m)).astype(int)
+            cv2.line(canvas, tuple(map(int, front[0])), tuple(map(int, front[1])), c, 1, cv2.LINE_AA)
+    band = np.full((36, w, 3), 255, np.uint8)
+    for k, line in enumerate((title, f"x forward {grid.x_range[0]:g}..{grid.x_range[1]:g} m (right), "
+                                     f"y left {grid.y_range[0]:g}..{grid.y_range[1]:g} m (up), {px_per_m:g} px/m")):
+        cv2.putText(band, line, (4, 14 + 16 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1, cv2.LINE_AA)
+    return np.concatenate([band, canvas])

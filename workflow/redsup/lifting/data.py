@@ -14,11 +14,11 @@ sampler, whether or not it trains with the consistency term.
 """
 from __future__ import annotations
 
+import csv
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 import torch
 
 from redsup import sceneio
@@ -59,16 +59,26 @@ class RawObjects:
 
 
 def read_tracks(path: str | Path | None, n_detections: int) -> np.ndarray:
-    """(n_detections,) track id per detection from tracks3d_{level}.csv (-1 for untracked ones)."""
+    """(n_detections,) track id per detection from tracks3d_{level}.csv (-1 for untracked ones). Read with the
+    csv module: pandas would add 0.4 s of start-up to every lifting job for two integer columns."""
     track = np.full(n_detections, -1, dtype=np.int64)
     if path is None:
         return track
-    table = pd.read_csv(path)
-    if len(table):
-        if table["detection"].max() >= n_detections:
-            raise ValueError(f"{path}: detection index {table['detection'].max()} but the detections file "
+    with open(path, newline="") as f:
+        reader = csv.DictReader(f)
+        missing = {"detection", "track"} - set(reader.fieldnames or ())
+        if missing:
+            raise ValueError(f"{path}: no column {', '.join(sorted(missing))} (a tracks3d table)")
+        try:
+            rows = [(int(r["detection"]), int(r["track"])) for r in reader]
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"{path}: a detection or track value is not an integer ({exc})") from None
+    if rows:
+        det, trk = np.array(rows, dtype=np.int64).T
+        if det.max() >= n_detections:
+            raise ValueError(f"{path}: detection index {det.max()} but the detections file "
                              f"has {n_detections} rows")
-        track[table["detection"].to_numpy(dtype=np.int64)] = table["track"].to_numpy(dtype=np.int64)
+        track[det] = trk
     return track
 
 

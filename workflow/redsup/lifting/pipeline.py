@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from redsup import checkpoint
-from redsup.det3d.template import TemplateSpec, build_template
+from redsup.det3d.template import Template, build_template, spec_from_config
 from redsup.lifting import data as D
 from redsup.lifting.criterion import build_criterion
 from redsup.lifting.evaluate import evaluate_frames, split_frames
@@ -72,8 +72,7 @@ def load_model(path: str | Path, device: str | torch.device = "cpu") -> torch.nn
 
 def make_template(cfg: dict):
     """The fixed template car (`lifting.template`: distance-field voxel and margin; default car size)."""
-    t = cfg["template"]
-    return build_template(TemplateSpec(voxel=float(t["voxel"]), margin=float(t["margin"])))
+    return build_template(spec_from_config(cfg))
 
 
 def read_labels(path: str | Path) -> dict[str, dict[int, np.ndarray]]:
@@ -147,11 +146,12 @@ def diagnostics(scenes: list[D.SceneInput], table: D.ObjectTable, boxes: np.ndar
 
 def run_configuration(spec: dict, cfg: dict, train_scenes: list[D.SceneInput], test_scenes: list[D.SceneInput],
                       seed: int, labels_path: str | None = None, log=None, camera: str = "cam_front",
-                      min_depth: float = 0.1) -> tuple[torch.nn.Module, dict, dict]:
-    """Train one configuration and evaluate it. Returns (model, KITTI metrics, info for the run record)."""
+                      min_depth: float = 0.1, template: Template | None = None) -> tuple[torch.nn.Module, dict, dict]:
+    """Train one configuration and evaluate it. Returns (model, KITTI metrics, info for the run record).
+    ``template``: the stage's template car (rule template_field's file, `load_template`); built here if None."""
     start = time.perf_counter()
     device = resolve_device(cfg.get("device", "cpu"))
-    template = make_template(cfg).to(device=device)
+    template = (template or make_template(cfg)).to(device=device)
     labels = read_labels(labels_path) if labels_path else None
     raws = training_raws(spec, train_scenes, labels, camera=camera, min_depth=min_depth)
     table = load_table(raws, train_scenes, cfg, int(cfg["train"]["min_points"]), float(cfg["train"]["min_score"]),
@@ -183,12 +183,13 @@ def run_configuration(spec: dict, cfg: dict, train_scenes: list[D.SceneInput], t
     return model, metrics, info
 
 
-def make_labels(model: torch.nn.Module, spec: dict, cfg: dict, scenes: list[D.SceneInput], seed: int) -> dict:
+def make_labels(model: torch.nn.Module, spec: dict, cfg: dict, scenes: list[D.SceneInput], seed: int,
+                template: Template | None = None) -> dict:
     """Our automatically generated labels: the model's boxes for the training detections (Table IV (iii)).
 
     Returns the arrays of the labels npz: scene (names), detection (rows), box (N, 7), score.
     """
-    template = make_template(cfg)
+    template = template or make_template(cfg)
     raws = [D.detection_objects(s, source=spec["points"])[0] for s in scenes]
     table = load_table(raws, scenes, cfg, int(cfg["train"]["min_points"]), float(cfg["train"]["min_score"]), seed)
     table = table.to(next(model.parameters()).device)
