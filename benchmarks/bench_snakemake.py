@@ -44,14 +44,18 @@ def snakemake(workdir: str | Path, profile: str, *args: str) -> tuple[float, flo
     cmd = [sys.executable, "-m", "snakemake", "--snakefile", str(ROOT / "Snakefile"), "--directory", str(workdir),
            "--cores", "2", *args, "--config", f"profile={profile}"]
     start = time.perf_counter()
-    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
-    cpu = 0.0
-    while proc.poll() is None:
-        cpu = _own_cpu_s(proc.pid) or cpu
-        time.sleep(0.5)
-    wall = time.perf_counter() - start
-    if proc.returncode != 0:
-        raise SystemExit(f"snakemake {' '.join(args)} failed:\n{proc.stderr.read()[-3000:]}")
+    # stderr to a file, not a pipe: Snakemake's log (and MLflow's progress bars) would fill a pipe that is only
+    # read at the end, and block it
+    with tempfile.TemporaryFile("w+") as err:
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=err, text=True)
+        cpu = 0.0
+        while proc.poll() is None:
+            cpu = _own_cpu_s(proc.pid) or cpu
+            time.sleep(0.5)
+        wall = time.perf_counter() - start
+        if proc.returncode != 0:
+            err.seek(0)
+            raise SystemExit(f"snakemake {' '.join(args)} failed:\n{err.read()[-3000:]}")
     return wall, cpu
 
 

@@ -9,7 +9,6 @@ import json
 from pathlib import Path
 from typing import TYPE_CHECKING
 
-import cv2
 import numpy as np
 
 if TYPE_CHECKING:
@@ -91,6 +90,8 @@ def read_lidar(path: str | Path) -> np.ndarray:
 
 def read_image(path: str | Path) -> np.ndarray:
     """RGB uint8 image."""
+    import cv2   # here: jobs that read only JSON / npz (tables, calibration) skip its 0.1-0.15 s import
+
     img = cv2.imread(str(path), cv2.IMREAD_COLOR)
     if img is None:
         what = "missing" if not Path(path).exists() else "unreadable (not a valid image)"
@@ -100,6 +101,8 @@ def read_image(path: str | Path) -> np.ndarray:
 
 def read_label_png(path: str | Path) -> np.ndarray:
     """A single-channel PNG as stored (uint8 or uint16)."""
+    import cv2
+
     img = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
     if img is None or img.ndim != 2:
         raise SceneError(f"{path}: missing or not a single-channel PNG")
