@@ -167,8 +167,11 @@ def main(argv=None) -> int:
     for cam in mode_cfg["cameras"]:
         for s in train_scenes:
             sd = res / "raw" / ds / s
+            stereo = res / "prepared" / ds / s / "cam_front_right.npz" if cam == "cam_front" and "stereo" in sources \
+                else None   # S / MS: the partner camera, as depth_train.py
             seqs.append(data.load_sequence(res / "prepared" / ds / s / f"{cam}.npz", scene_dir=sd,
-                                           reversed_order=(cam == "cam_back"), camera=cam))
+                                           reversed_order=(cam == "cam_back"), camera=cam, stereo_npz=stereo,
+                                           stereo_baseline=tcfg["stereo_baseline"] if stereo else None))
             train_Twc.append(camera_poses(sd, cam))
     h, w = systems.input_size(seqs[0].size, float(model_cfg.get("input_scale", 1.0)))
     seqs = [data.resize_sequence(s, (h, w)) for s in seqs]
@@ -182,6 +185,9 @@ def main(argv=None) -> int:
         val_Twc.append(camera_poses(sd, ecam))
     meta = {**model_cfg, "height": h, "width": w, "mode": mode, "sources": sources, "cameras": list(mode_cfg["cameras"]),
             "dataset": ds, "train": dict(tcfg), "loss": dict(dcfg["loss"]), "seed": seed}
+    if "stereo" in sources:   # S / MS are validated at the fixed stereo scale, as depth_train.py's meta makes them
+        meta.update(stereo_baseline=tcfg["stereo_baseline"],
+                    stereo_scale_factor=seqs[0].extra["stereo_baseline_m"] / tcfg["stereo_baseline"])
     torch.manual_seed(seed)
     models = systems.build(meta)
     loss_kwargs = experiments.loss_settings(dcfg)
