@@ -53,7 +53,7 @@ def test_every_configuration_trained_once_per_seed_with_curves(built, cfg):
             curves = {m[0] for m in record["metrics"] if m[2] > 0}
             assert {"train/loss", "train/heatmap", "train/yaw"} <= curves
             bev = [a[0] for a in record["artifacts"] if a[0].endswith("bev_test_frame.png")]
-            assert len(bev) == 1 and cv2.imread(bev[0]).shape[2] == 3   # drawn with OpenCV, BGR on disk
+            assert len(bev) == 1 and cv2.imread(str(built / bev[0])).shape[2] == 3   # drawn with OpenCV, BGR on disk
 
 
 def test_tables_have_paper_values_and_scores(built, cfg):

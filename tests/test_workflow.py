@@ -48,18 +48,23 @@ def test_prepared_camera_files(built):
 
 
 def test_detection_overlay_artifact(built):
-    """Each detection job logs its busiest frame: the camera image at 2x under a 36-pixel caption band, with the
-    matched boxes drawn in yellow (the stand-in detector matches most of its masks to a ground-truth car)."""
+    """Each detection job logs its busiest frame: the camera image magnified to at least 800 px wide (4x for the
+    tiny profile's 208 px renders) under a 36-pixel caption band, with the matched boxes drawn in yellow (the
+    stand-in detector matches most of its masks to a ground-truth car)."""
     import cv2
 
     from redsup import sceneio
+    from redsup.prep.figures import overlay_scale
+
+    assert (overlay_scale(208), overlay_scale(416), overlay_scale(1242), overlay_scale(801)) == (4, 2, 1, 1)
 
     record = json.loads((built / "results/runs/prepared/world_kitti/test_000/detections_cityscapes.json").read_text())
     (png,) = [a for a, _ in record["artifacts"] if "detections_cityscapes_frame" in a]
     image = cv2.cvtColor(cv2.imread(str(built / png)), cv2.COLOR_BGR2RGB)
     scene = built / "results/raw/world_kitti/test_000"
     camera = sceneio.read_image(scene / "cam_front" / sceneio.frame_name(0, "png"))
-    assert image.shape == (2 * camera.shape[0] + 36, 2 * camera.shape[1], 3)
+    k = overlay_scale(camera.shape[1])
+    assert image.shape == (k * camera.shape[0] + 36, k * camera.shape[1], 3)
     assert (image[:36] == 255).mean() > 0.8                                   # the caption band
     assert np.all(image[36:] == (255, 255, 0), axis=-1).sum() > 20           # yellow box outlines
 

@@ -24,9 +24,15 @@ def busiest_frame(d: dict) -> int:
     return int(np.bincount(d["frame"]).argmax())
 
 
-def detection_overlay(scene_dir: str | Path, d: dict, frame: int, scale: int = 2) -> np.ndarray:
-    """RGB uint8 image (``scale`` x the camera's size, with a caption band): the frame's masks blended over the
-    camera image, boxes and scores (yellow matched, magenta unmatched), and the L_m points coloured by the
+def overlay_scale(width: int, min_width: int = 800) -> int:
+    """The whole-number magnification that makes an image ``width`` px wide at least ``min_width`` px wide (so
+    that boxes, scores and the caption stay legible on small renders), at least 1."""
+    return max(1, -(-int(min_width) // int(width)))
+
+
+def detection_overlay(scene_dir: str | Path, d: dict, frame: int, min_width: int = 800) -> np.ndarray:
+    """RGB uint8 image (the camera's size x `overlay_scale`, with a caption band): the frame's masks blended over
+    the camera image, boxes and scores (yellow matched, magenta unmatched), and the L_m points coloured by the
     ground-truth inlier flag (green inside the matched box, red outside)."""
     scene_dir = Path(scene_dir)
     camera = str(d["camera"])
@@ -41,6 +47,7 @@ def detection_overlay(scene_dir: str | Path, d: dict, frame: int, scale: int = 2
         m = masks_io.mask_of(d, i)
         overlay[m] = 0.5 * overlay[m] + 0.5 * rng.uniform(0.2, 1.0, 3)
     h, w = image.shape[:2]
+    scale = overlay_scale(w, min_width)
     canvas = cv2.resize(np.round(overlay * 255).astype(np.uint8), (w * scale, h * scale),
                         interpolation=cv2.INTER_NEAREST)
     for i in ids:
