@@ -65,6 +65,8 @@ def parse_args(argv=None):
     p.add_argument("--width", type=int, default=None, help="base_channels of the networks")
     p.add_argument("--input-scale", type=float, default=None)
     p.add_argument("--init-disparity", type=float, default=None, help="initial sigmoid output (depth.modes.*)")
+    p.add_argument("--curriculum", type=int, default=0,
+                   help="resolution curriculum: first this many steps at half the input size (no lr decay), then --steps")
     p.add_argument("--val-every", type=int, default=50)
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--dump", action="store_true",
@@ -290,6 +292,14 @@ def main(argv=None) -> int:
     print(f"{ds}/{mode} seed {seed} (index {args.seed_index}) tag {args.tag}: {len(seqs)} train seqs "
           f"{h}x{w}, val {val_scenes}; train {tcfg}; loss {loss_kwargs}; warmup {warmup}", flush=True)
     t0 = time.perf_counter()
+    if args.curriculum > 0:   # coarse-to-fine: the same networks (fully convolutional) on half-size frames first
+        coarse = [data.resize_sequence(s_, (h // 2, w // 2)) for s_ in seqs]
+        print(f"curriculum: {args.curriculum} steps at {h // 2}x{w // 2}", flush=True)
+        training.train(models, coarse, sources, steps=args.curriculum, batch_size=int(tcfg["batch_size"]),
+                       lr=float(tcfg["lr"]), decay_at=2.0, gamma=float(tcfg["gamma"]), flip=tcfg["flip"],
+                       min_speed=tcfg["min_speed"], seed=seed + 1, loss_kwargs=loss_kwargs, callback=on_step,
+                       device="cpu", criterion=None)
+        validate(0)
     summary = training.train(models, seqs, sources, steps=steps, batch_size=int(tcfg["batch_size"]),
                              lr=float(tcfg["lr"]), decay_at=tcfg["decay_at"], gamma=float(tcfg["gamma"]),
                              flip=tcfg["flip"], min_speed=tcfg["min_speed"], seed=seed, loss_kwargs=loss_kwargs,
