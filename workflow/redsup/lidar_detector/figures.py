@@ -7,6 +7,7 @@ import numpy as np
 
 from redsup.det3d.boxes import bev_corners
 from redsup.lidar_detector.grid import GridSpec
+from redsup.prep.figures import with_caption
 
 POINT = (150, 150, 150)   # RGB: LiDAR points grey
 GT = (0, 160, 0)          # ground-truth boxes green
@@ -44,8 +45,5 @@ def bev_image(points: np.ndarray, gt_boxes: np.ndarray, det_boxes: np.ndarray, d
             front = np.round(bev_pixels(np.stack([boxes[k, :2], (corners[0] + corners[3]) / 2]), grid,
                                         px_per_m)).astype(int)
             cv2.line(canvas, tuple(map(int, front[0])), tuple(map(int, front[1])), c, 1, cv2.LINE_AA)
-    band = np.full((36, w, 3), 255, np.uint8)
-    for k, line in enumerate((title, f"x forward {grid.x_range[0]:g}..{grid.x_range[1]:g} m (right), "
-                                     f"y left {grid.y_range[0]:g}..{grid.y_range[1]:g} m (up), {px_per_m:g} px/m")):
-        cv2.putText(band, line, (4, 14 + 16 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1, cv2.LINE_AA)
-    return np.concatenate([band, canvas])
+    return with_caption(canvas, (title, f"x forward {grid.x_range[0]:g}..{grid.x_range[1]:g} m (right), "
+                                        f"y left {grid.y_range[0]:g}..{grid.y_range[1]:g} m (up), {px_per_m:g} px/m"))

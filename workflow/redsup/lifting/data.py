@@ -59,8 +59,8 @@ class RawObjects:
 
 
 def read_tracks(path: str | Path | None, n_detections: int) -> np.ndarray:
-    """(n_detections,) track id per detection from tracks3d_{level}.csv (-1 for untracked ones). Read with the
-    csv module: pandas would add 0.4 s of start-up to every lifting job for two integer columns."""
+    """(n_detections,) track id per detection from tracks3d_{level}.csv (-1 for untracked ones); a missing column
+    or a non-integer value is an error naming the file."""
     track = np.full(n_detections, -1, dtype=np.int64)
     if path is None:
         return track

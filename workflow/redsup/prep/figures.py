@@ -63,8 +63,13 @@ def detection_overlay(scene_dir: str | Path, d: dict, frame: int, min_width: int
             for (u, v), ok in zip(np.round(uv * scale).astype(int), inl):
                 if 0 <= u < w * scale and 0 <= v < h * scale:
                     cv2.circle(canvas, (int(u), int(v)), 1, INLIER if ok else OUTLIER, -1)
-    band = np.full((36, canvas.shape[1], 3), 255, np.uint8)
-    for k, line in enumerate((f"{scene_dir.name} frame {frame}: {len(ids)} detections ({d['level']})",
-                              "yellow = matched, magenta = unmatched; L_m points green = in gt box, red = outlier")):
+    return with_caption(canvas, (f"{scene_dir.name} frame {frame}: {len(ids)} detections ({d['level']})",
+                                 "yellow = matched, magenta = unmatched; L_m points green = in gt box, red = outlier"))
+
+
+def with_caption(image: np.ndarray, lines: tuple[str, str]) -> np.ndarray:
+    """``image`` (RGB uint8) under a 36-pixel white band holding two lines of black text."""
+    band = np.full((36, image.shape[1], 3), 255, np.uint8)
+    for k, line in enumerate(lines):
         cv2.putText(band, line, (4, 14 + 16 * k), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (0, 0, 0), 1, cv2.LINE_AA)
-    return np.concatenate([band, canvas])
+    return np.concatenate([band, image])
