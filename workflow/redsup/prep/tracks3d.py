@@ -13,7 +13,6 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
-import pandas as pd
 
 from redsup import geometry, sceneio
 from redsup.fileio import write_text_atomic
@@ -88,8 +87,8 @@ def _fraction(count: int, total: int) -> float:
 
 
 def track_scene(d: dict, poses: np.ndarray, T_vehicle_lidar: np.ndarray,
-                tracking_cfg: dict) -> tuple[pd.DataFrame, dict]:
-    """(the tracks3d table, summary numbers) for one scene's detections."""
+                tracking_cfg: dict) -> tuple[dict[str, np.ndarray], dict]:
+    """(the tracks3d table as columns `COLUMNS`, summary numbers) for one scene's detections."""
     frames = d["frame"].astype(np.int64)
     if len(frames) and frames.max() >= len(poses):
         raise ValueError(f"detections reach frame {frames.max()} but only {len(poses)} ego poses exist")
@@ -98,10 +97,9 @@ def track_scene(d: dict, poses: np.ndarray, T_vehicle_lidar: np.ndarray,
     tracks, links = build_tracks(frames, centres, counts, poses, usable, tracking_cfg["max_distance"],
                                  tracking_cfg["max_count_ratio"])
     rows = np.flatnonzero(usable)
-    table = pd.DataFrame({"detection": rows, "frame": frames[rows], "track": tracks[rows],
-                          "cx": centres[rows, 0], "cy": centres[rows, 1], "cz": centres[rows, 2],
-                          "n_points": counts[rows]}, columns=COLUMNS)
-    lengths = table.groupby("track").size() if len(table) else pd.Series(dtype=int)
+    table = {"detection": rows, "frame": frames[rows], "track": tracks[rows],
+             "cx": centres[rows, 0], "cy": centres[rows, 1], "cz": centres[rows, 2], "n_points": counts[rows]}
+    lengths = np.unique(tracks[rows], return_counts=True)[1]   # detections per track
     gt = d["matched_track"]
     both = [(a, b) for a, b in links if gt[a] >= 0 and gt[b] >= 0]
     summary = {
@@ -109,12 +107,20 @@ def track_scene(d: dict, poses: np.ndarray, T_vehicle_lidar: np.ndarray,
         "n_skipped_low_score": int(np.count_nonzero(d["score"] < tracking_cfg["min_score"])),
         "n_skipped_few_points": int(np.count_nonzero(counts < max(1, tracking_cfg["min_points"]))),
         "n_tracks": int(len(lengths)), "mean_track_length": float(lengths.mean()) if len(lengths) else 0.0,
-        "n_tracks_multi_frame": int(np.count_nonzero(lengths.to_numpy() > 1)),
+        "n_tracks_multi_frame": int(np.count_nonzero(lengths > 1)),
         "n_links": len(links),
         "link_gt_consistent": _fraction(sum(bool(gt[a] == gt[b] >= 0) for a, b in links), len(links)),
         "link_gt_consistent_matched": _fraction(sum(bool(gt[a] == gt[b]) for a, b in both), len(both)),
     }
     return table, summary
+
+
+def tracks_csv(table: dict[str, np.ndarray]) -> str:
+    """The CSV text of a tracks3d table: integer columns as integers, the centre to 0.1 mm."""
+    lines = [",".join(COLUMNS)]
+    for det, frame, track, cx, cy, cz, n in zip(*(table[c] for c in COLUMNS)):
+        lines.append(f"{int(det)},{int(frame)},{int(track)},{cx:.4f},{cy:.4f},{cz:.4f},{int(n)}")
+    return "\n".join(lines) + "\n"
 
 
 def write_tracks3d(scene_dir: str | Path, detections_path: str | Path, out_path: str | Path,
@@ -127,5 +133,5 @@ def write_tracks3d(scene_dir: str | Path, detections_path: str | Path, out_path:
         raise sceneio.SceneError(f"{scene_dir / 'extrinsics.json'}: no extrinsics for '{LIDAR}'")
     table, summary = track_scene(masks_io.load_detections(detections_path), poses, extrinsics[LIDAR],
                                  tracking_cfg)
-    write_text_atomic(out_path, table.to_csv(index=False, float_format="%.4f"))
+    write_text_atomic(out_path, tracks_csv(table))
     return summary
