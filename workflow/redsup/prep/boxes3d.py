@@ -28,6 +28,17 @@ def points_in_box(points: np.ndarray, box, margin: float = 0.0) -> np.ndarray:
             & (np.abs(d[:, 2]) <= height / 2 + margin))
 
 
+def distance_to_box(points: np.ndarray, box) -> np.ndarray:
+    """(N,) Euclidean distance (m) of the (N, >=3) points to the box (same frame): 0 inside, else the distance to
+    the nearest point of the solid box."""
+    x, y, z, length, width, height, yaw = (float(v) for v in box)
+    d = np.asarray(points, dtype=np.float64)[:, :3] - np.array([x, y, z])
+    c, s = np.cos(yaw), np.sin(yaw)
+    local = np.stack([c * d[:, 0] + s * d[:, 1], -s * d[:, 0] + c * d[:, 1], d[:, 2]], axis=1)
+    excess = np.maximum(np.abs(local) - np.array([length, width, height]) / 2, 0.0)
+    return np.linalg.norm(excess, axis=1)
+
+
 def projected_box_area(box, T_camera_vehicle: np.ndarray, K: np.ndarray, min_depth: float = 0.1) -> float:
     """Area in pixels of the 2D rectangle enclosing the projected corners of a vehicle-frame box
     (not clipped to the image: truncation counts as invisible). 0 when no corner is in front."""

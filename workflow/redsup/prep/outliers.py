@@ -8,7 +8,11 @@ masks painted from label boxes), into its instance mask; a point is an outlier w
 rect0, else the vehicle frame). The stand-in detector's masks (``detections_*.npz``) are measured the same way
 from their stored point sets and ground-truth inlier flags. ``by_distance`` pools the counts per distance bin
 (ego distance of the box centre); the box's outliers are also split into its upper 45 % (cabin, glass, roof
-line: ``box_top_fraction``) and the rest (``box_bottom_fraction``).
+line: ``box_top_fraction``) and the rest (``box_bottom_fraction``). How far the box's outliers lie from the 3D box
+matters as much as how many there are: the plain squared loss of ch. 6 eq. (1) grows with the square of that
+distance, so ``by_distance`` also reports the median distance of an outlier from the box and the root of the
+mean squared distance over all the box's points (``box_rms_excess``: what the outliers alone add to eq. (1)
+at the true pose, as a length).
 """
 from __future__ import annotations
 
@@ -19,7 +23,7 @@ import numpy as np
 from redsup import geometry, sceneio
 from redsup.det3d.eval_frame import scene_eval_transform, to_eval_frame
 from redsup.prep import masks_io
-from redsup.prep.boxes3d import points_in_box
+from redsup.prep.boxes3d import distance_to_box, points_in_box
 from redsup.prep.detections import BOX_FIELDS, LIDAR, SceneContext
 from redsup.prep.points import project_sweep, read_sweep
 
@@ -42,11 +46,12 @@ def outlier_counts(inside: np.ndarray, selected: np.ndarray) -> tuple[int, int]:
 
 
 def scene_records(scene_dir: str | Path, camera: str, classes=("car",), *, min_depth: float = 0.1,
-                  margin: float = 0.2, use_masks: bool | None = None) -> list[dict]:
+                  margin: float = 0.2, use_masks: bool | None = None, keep_points: bool = False) -> list[dict]:
     """One record per ground-truth car with a 2D box in any frame of a scene: {scene, frame, track, distance,
-    occlusion, n_box, out_box, n_top, out_top (upper band of the box), n_mask, out_mask} (mask counts None
-    without instance masks). ``use_masks`` None: from
-    scene.json (see the module docstring)."""
+    occlusion, n_box, out_box, n_top, out_top (upper band of the box), excess_box (each box outlier's distance
+    from the 3D box), n_mask, out_mask} (mask counts None without instance masks). ``use_masks`` None: from
+    scene.json (see the module docstring). ``keep_points``: also ``box`` (the 3D box), ``box_points`` and
+    ``mask_points`` (None without masks), the (n, 3) points in the box's frame."""
     ctx = SceneContext(scene_dir, camera, list(classes))
     meta = sceneio.read_meta(ctx.dir)
     if use_masks is None:
@@ -77,12 +82,17 @@ def scene_records(scene_dir: str | Path, camera: str, classes=("car",), *, min_d
             in_rect = (u >= c0) & (u <= c1) & (v >= r0) & (v <= r1)
             n_box, out_box = outlier_counts(inside, in_rect)
             n_top, out_top = outlier_counts(inside, in_rect & (v < r0 + TOP_BAND * (r1 - r0)))
+            excess = distance_to_box(frame_pts[in_rect & ~inside], box)
             rec = {"scene": ctx.dir.name, "frame": i, "track": int(row["track_id"]),
                    "distance": float(np.hypot(row["x"], row["y"])), "occlusion": int(row["occlusion"]),
                    "n_box": n_box, "out_box": out_box, "n_top": n_top, "out_top": out_top,
-                   "n_mask": None, "out_mask": None}
-            if instance is not None:
-                rec["n_mask"], rec["out_mask"] = outlier_counts(inside, instance[v, u] == int(row["track_id"]))
+                   "excess_box": [float(e) for e in excess], "n_mask": None, "out_mask": None}
+            in_mask = None if instance is None else instance[v, u] == int(row["track_id"])
+            if in_mask is not None:
+                rec["n_mask"], rec["out_mask"] = outlier_counts(inside, in_mask)
+            if keep_points:
+                rec.update(box=box, box_points=frame_pts[in_rect],
+                           mask_points=None if in_mask is None else frame_pts[in_mask])
             out.append(rec)
     return out
 
@@ -139,5 +149,10 @@ def by_distance(records: list[dict], edges=(0.0, 20.0, 40.0, 80.0), min_points: 
         out_low = sum(r["out_box"] - r["out_top"] for r in banded)
         row["box_top_fraction"] = out_top / n_top if n_top else None
         row["box_bottom_fraction"] = out_low / n_low if n_low else None
+        measured = [r for r in sel if r.get("excess_box") is not None and r["n_box"] >= min_points]
+        excess = np.array([e for r in measured for e in r["excess_box"]], dtype=np.float64)
+        n_all = sum(r["n_box"] for r in measured)
+        row["box_excess_median"] = float(np.median(excess)) if len(excess) else None
+        row["box_rms_excess"] = float(np.sqrt(np.sum(excess ** 2) / n_all)) if n_all else None
         out.append(row)
     return out
