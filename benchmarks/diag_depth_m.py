@@ -67,6 +67,9 @@ def parse_args(argv=None):
     p.add_argument("--init-disparity", type=float, default=None, help="initial sigmoid output (depth.modes.*)")
     p.add_argument("--curriculum", type=int, default=0,
                    help="resolution curriculum: first this many steps at half the input size (no lr decay), then --steps")
+    p.add_argument("--automask-from", type=int, default=None,
+                   help="auto-masking off for the first N steps (every pixel in the loss), then as configured "
+                        "(default: the mode's automask_after)")
     p.add_argument("--val-every", type=int, default=50)
     p.add_argument("--threads", type=int, default=1)
     p.add_argument("--dump", action="store_true",
@@ -156,6 +159,8 @@ def main(argv=None) -> int:
     model_id = f"{ds}/{mode}" + (f"/seed{args.seed_index}" if args.seed_index else "")
     seed = args.seed if args.seed is not None else model_seed(cfg["seed"], model_id)   # as depth_train
     steps = int(tcfg["steps"])
+    automask_after = int(tcfg["automask_after"] if args.automask_from is None else args.automask_from)
+    tcfg["automask_after"] = automask_after
 
     # ---- data: as depth_train.py (train scenes), plus the val scenes with their LiDAR depth
     res = Path(args.results)
@@ -304,11 +309,12 @@ def main(argv=None) -> int:
                              lr=float(tcfg["lr"]), decay_at=tcfg["decay_at"], gamma=float(tcfg["gamma"]),
                              flip=tcfg["flip"], min_speed=tcfg["min_speed"], seed=seed, loss_kwargs=loss_kwargs,
                              callback=on_step, device="cpu", criterion=None, validate=validate,
-                             validate_every=args.val_every)
+                             validate_every=args.val_every, automask_after=automask_after)
     wall = time.perf_counter() - t0
     final, best = val_rows[-1], min(val_rows, key=lambda r: r["abs_rel"])
     result = {"tag": args.tag, "seed_index": args.seed_index, "seed": seed, "wall_s": wall,
               "recipe": {"steps": steps, "batch": int(tcfg["batch_size"]), "lr": float(tcfg["lr"]), "warmup": warmup,
+                         "automask_after": automask_after,
                          "decay_at": tcfg["decay_at"], "gamma": float(tcfg["gamma"]), "flip": bool(tcfg["flip"]),
                          "min_speed": float(tcfg["min_speed"]), "smoothness": loss_kwargs["smoothness_weight"],
                          "width": int(model_cfg["base_channels"]), "size": [h, w]},

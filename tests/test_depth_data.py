@@ -121,6 +121,21 @@ def test_train_runs_logs_and_decays():
         training.train(networks.build_models(8), [_seq(1)], ["prev"], steps=1, batch_size=1, lr=1e-4)
 
 
+def test_automask_after_keeps_every_pixel_in_the_loss_first():
+    """automask_after = 2: the kept-pixel fraction is exactly 1 in steps 1-2 (no auto-masking), and the identity
+    reprojection masks pixels from step 3 on (random frames: the warp is no better than no warp for many)."""
+    seq = _seq(6, speed=np.full(6, 5.0))
+    seen = []
+    training.train(networks.build_models(8), [seq], ["prev", "next"], steps=4, batch_size=2, lr=1e-3,
+                   loss_kwargs={"noise_std": 0.0}, automask_after=2,
+                   callback=lambda s, t: seen.append(t["automask_fraction"]))
+    assert seen[:2] == [1.0, 1.0]
+    assert all(f < 1.0 for f in seen[2:])
+    with pytest.raises(ValueError, match="Monodepth2 loss only"):
+        training.train(networks.build_models(8), [seq], ["prev", "next"], steps=1, batch_size=2, lr=1e-3,
+                       automask_after=1, criterion=lambda m, b, s: {"loss": torch.zeros(())})
+
+
 def _scene(tmp_path, n=4):
     import json
 

@@ -76,7 +76,8 @@ with child_run(sm.log.run, parent, f"train {sm.wildcards.model}", rule=sm.rule, 
                              flip=tcfg["flip"], min_speed=tcfg["min_speed"], seed=seed,
                              loss_kwargs=loss_settings(cfg), callback=log_step, device=device,
                              criterion=systems.criterion(meta, loss_settings(cfg), int(tcfg["steps"]), seed),
-                             validate=validate, validate_every=val_every)
+                             validate=validate, validate_every=val_every,
+                             automask_after=int(tcfg.get("automask_after", 0)))
     meta.update(summary)
     if "stereo" in sources:  # metres per network unit: evaluate S / MS with this fixed scale (Monodepth2's 5.4)
         metric = seqs[0].extra["stereo_baseline_m"]

@@ -133,7 +133,7 @@ SYSTEM_TRAIN_KEYS = ("steps", "batch_size", "lr", "decay_at", "gamma", "epochs")
 def train_settings(depth_cfg: Mapping, dataset: str, mode: str) -> tuple[dict, dict]:
     """(model settings, training settings) of one model: ``depth.model`` / ``depth.train`` overridden by the
     system's ``depth.systems.<system>``, then by the mode's ``input_scale`` / ``steps`` and then by the model
-    entry's ``steps``. The model settings name the ``system``; the training settings hold ``epochs``
+    entry's ``steps``; ``automask_after`` is the mode's (default 0). The model settings name the ``system``; the training settings hold ``epochs``
     (validation passes; 0 = none) for the systems that select their best epoch on the validation split."""
     system = system_of(depth_cfg, mode)
     sset = system_settings(depth_cfg, system)
@@ -147,6 +147,7 @@ def train_settings(depth_cfg: Mapping, dataset: str, mode: str) -> tuple[dict, d
                   if m["dataset"] == dataset and m["mode"] == mode and m.get("steps")), mode_cfg.get("steps"))
     if steps:
         train["steps"] = int(steps)
+    train["automask_after"] = int(mode_cfg.get("automask_after", 0))
     return model, train
 
 
