@@ -250,6 +250,23 @@ def test_seed_rows_are_averaged_with_their_spread(cfg):
     assert configs.seed_models("world_lyft/MD", 2)[1] == "world_lyft/MD/seed1"
 
 
+def test_a_table_caps_the_seeds_its_rows_read(cfg):
+    """world_kitti/M with 3 training seeds: a table without ``seeds`` reads every seed's run (3 rows per label),
+    one with ``seeds: 1`` only seed 0's."""
+    import copy
+
+    c = copy.deepcopy(cfg)
+    c["depth"]["models"] = [dict(m, seeds=3) if (m["dataset"], m["mode"]) == ("world_kitti", "M") else m
+                            for m in c["depth"]["models"]]
+    c["depth"]["tables"]["mccraith_ch4_table5"].pop("seeds", None)
+    c["depth"]["tables"]["mccraith_ch4_table2"]["seeds"] = 1
+    rows = plan.rows(c, _scenes_of(c))
+    m_rows = [run for label, run, _ in rows["mccraith_ch4_table5"] if label.endswith("| M")]
+    assert len(m_rows) == 6                                                 # baseline + ours, 3 seeds each
+    assert [sum(f"M-seed{k}_" in r for r in m_rows) for k in (1, 2)] == [2, 2]
+    assert len(rows["mccraith_ch4_table2"]) == len(plan.expand_rows("mccraith_ch4_table2", c["depth"]))
+
+
 def test_model_seed_is_the_training_seed_of_a_model_id():
     """Seed index 0: base + crc32("<dataset>/<mode>") mod 1e5 (crc32(b"world_kitti/M") = ...72623); index k adds
     crc32 of the whole id mod 1e5 (b"world_kitti/M/seed2": ...22484). A change here retrains every model."""

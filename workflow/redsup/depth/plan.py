@@ -126,10 +126,11 @@ def _available(config: Mapping, scenes_of: Callable[[str], list[str]]) -> tuple[
     return available, cameras
 
 
-def with_seeds(rows: Sequence[Row], depth_cfg: Mapping) -> list[Row]:
-    """Each row once per training seed of its model (same label: the table shows mean ± std over seeds)."""
+def with_seeds(rows: Sequence[Row], depth_cfg: Mapping, max_seeds: int | None = None) -> list[Row]:
+    """Each row once per training seed of its model, the first ``max_seeds`` of them when given (same label: the
+    table shows mean ± std over seeds)."""
     return [replace(r, spec=replace(r.spec, model=m)) for r in rows
-            for m in seed_models(r.spec.model, n_seeds(depth_cfg, r.spec.model))]
+            for m in seed_models(r.spec.model, min(n_seeds(depth_cfg, r.spec.model), max_seeds or 10 ** 9))]
 
 
 def table_rows(config: Mapping, scenes_of: Callable[[str], list[str]]) -> dict[str, list[Row]]:
@@ -142,7 +143,8 @@ def table_rows(config: Mapping, scenes_of: Callable[[str], list[str]]) -> dict[s
         ds, split = row.spec.data.split("/")
         return row.spec.model in models and available.get(ds, {}).get(split, 0) > 0
 
-    return {t: with_seeds([r for r in expand_rows(t, depth_cfg) if ok(r)], depth_cfg)
+    return {t: with_seeds([r for r in expand_rows(t, depth_cfg) if ok(r)], depth_cfg,
+                          depth_cfg["tables"][t].get("seeds"))
             for t in _tables_of_stage() if t in depth_cfg["tables"]}
 
 
