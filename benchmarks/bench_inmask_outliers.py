@@ -28,15 +28,14 @@ import sys
 import tempfile
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "workflow"))
 
-import numpy as np  # noqa: E402
-
 from redsup import config  # noqa: E402
-from redsup.adapters import adapt_scene, scene_ids  # noqa: E402
 from redsup.prep.detections import detect_scene  # noqa: E402
-from redsup.prep.outliers import by_distance, detection_records, scene_records  # noqa: E402
+from redsup.prep.outliers import adapted_records, by_distance, detection_records, scene_records  # noqa: E402
 from redsup.world.generate import write_scene  # noqa: E402
 
 EDGES = (0.0, 20.0, 40.0, 80.0)
@@ -47,11 +46,8 @@ def real_records(realdata: Path, work: Path, margin: float, keep_points: bool = 
     spec = {"kind": "kitti_object", "path": str(realdata / "kitti_object"),
             "crop": {"top": 0, "bottom": 0, "left": 0, "right": 0}, "resize": {"width": 320, "height": 96},
             "instances": {"source": "label_boxes"}}
-    out = []
-    for scene in scene_ids("kitti_object", spec):
-        adapt_scene("kitti_object", spec, scene, work / scene)
-        out += scene_records(work / scene, "cam_front", margin=margin, keep_points=keep_points)
-    return out
+    return [r for _, recs in adapted_records("kitti_object", spec, work, margin=margin, keep_points=keep_points)
+            for r in recs]
 
 
 def world_records(cfg: dict, work: Path, n_scenes: int, frames: int, seed: int, margin: float,

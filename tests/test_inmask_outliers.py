@@ -11,12 +11,20 @@ import pytest
 
 from redsup import config, sceneio
 from redsup.prep.boxes3d import distance_to_box
-from redsup.prep.outliers import by_distance, pixel_rect, scene_records
+from redsup.prep.outliers import adapted_records, by_distance, pixel_rect, scene_records
 from redsup.world.generate import write_scene as render_scene
 from test_detection import write_scene as hand_scene
 
 ROOT = Path(__file__).resolve().parents[1]
 REAL = Path(os.environ.get("REDSUP_REALDATA", ROOT.parent / "shared" / "realdata"))
+
+
+def _real_scenes(tmp_path, **kwargs):
+    """(scene folder, scene_records) of each frame of the KITTI object sample, adapted into tmp_path."""
+    spec = {"kind": "kitti_object", "path": str(REAL / "kitti_object"),
+            "crop": {"top": 0, "bottom": 0, "left": 0, "right": 0}, "resize": {"width": 320, "height": 96},
+            "instances": {"source": "label_boxes"}}
+    return adapted_records("kitti_object", spec, tmp_path, **kwargs)
 
 
 def test_pixel_rect_of_outer_edges():
@@ -52,16 +60,9 @@ def test_outliers_by_hand(tmp_path):
 def test_outliers_on_the_real_kitti_object_sample(tmp_path):
     """The three labelled cars of frames 000000-000003 (14, 36, 62 m, unoccluded): 28 %, 38 %, 25 % of the
     points in their 2D label box lie outside their 3D box (+ 0.2 m); no masks (instances from label boxes)."""
-    from redsup.adapters import adapt_scene, scene_ids
-
-    spec = {"kind": "kitti_object", "path": str(REAL / "kitti_object"),
-            "crop": {"top": 0, "bottom": 0, "left": 0, "right": 0}, "resize": {"width": 320, "height": 96},
-            "instances": {"source": "label_boxes"}}
     recs = []
-    for scene in scene_ids("kitti_object", spec):
-        adapt_scene("kitti_object", spec, scene, tmp_path / scene)
-        found = scene_records(tmp_path / scene, "cam_front")
-        boxes = sceneio.read_boxes(tmp_path / scene / "gt" / "boxes.csv")
+    for scene_dir, found in _real_scenes(tmp_path):
+        boxes = sceneio.read_boxes(scene_dir / "gt" / "boxes.csv")
         for r in found:
             n_lidar = int(boxes.loc[boxes["track_id"] == r["track"], "n_lidar"].iloc[0])
             assert r["n_box"] - r["out_box"] >= 0.9 * n_lidar  # the box's own points (margin 0) are inliers
@@ -155,19 +156,12 @@ def test_real_kitti_outliers_pull_the_squared_fit_metres_away(tmp_path):
     the thesis' plain squared-loss rows (41.5 / 62.6 AP_BEV moderate) cannot come from eq. (1) on such points."""
     import torch
 
-    from redsup.adapters import adapt_scene, scene_ids
     from redsup.det3d.fit import squared_fit_translation
     from redsup.det3d.pointsets import pad_point_sets
     from redsup.det3d.template import TemplateSpec, build_template
     from redsup.prep.boxes3d import points_in_box
 
-    spec = {"kind": "kitti_object", "path": str(REAL / "kitti_object"),
-            "crop": {"top": 0, "bottom": 0, "left": 0, "right": 0}, "resize": {"width": 320, "height": 96},
-            "instances": {"source": "label_boxes"}}
-    recs = []
-    for scene in scene_ids("kitti_object", spec):
-        adapt_scene("kitti_object", spec, scene, tmp_path / scene)
-        recs += scene_records(tmp_path / scene, "cam_front", keep_points=True)
+    recs = [r for _, found in _real_scenes(tmp_path, keep_points=True) for r in found]
     assert len(recs) == 3
     for r in recs:
         assert np.median(r["excess_box"]) > 10.0

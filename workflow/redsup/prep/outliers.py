@@ -97,6 +97,19 @@ def scene_records(scene_dir: str | Path, camera: str, classes=("car",), *, min_d
     return out
 
 
+def adapted_records(kind: str, spec: dict, work: str | Path, camera: str = "cam_front",
+                    **kwargs) -> list[tuple[Path, list[dict]]]:
+    """(scene folder, `scene_records` of it) for every scene of a real dataset (`redsup.adapters` kind and spec),
+    each adapted into ``work``/<scene> first; ``kwargs`` go to `scene_records`."""
+    from redsup.adapters import adapt_scene, scene_ids
+
+    out = []
+    for scene in scene_ids(kind, spec):
+        adapt_scene(kind, spec, scene, Path(work) / scene)
+        out.append((Path(work) / scene, scene_records(Path(work) / scene, camera, **kwargs)))
+    return out
+
+
 def detection_records(detections: dict, scene_dir: str | Path, camera: str, classes=("car",)) -> list[dict]:
     """Records of the stand-in detector's matched detections (arrays of detections_<level>.npz): n_mask /
     out_mask from the stored mask points L_m and their ground-truth inlier flags (inside the matched box grown
