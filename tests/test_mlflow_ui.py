@@ -9,7 +9,7 @@ app's requests are pending):
 2. a table's parent run shows its name, its experiment and every child run (`mlflow.parentRunId`) under
    "Child runs", each a link to the child's page;
 3. a child's metric page (a training curve such as a loss) shows the run, the metric and a plotted line
-   with one point per logged step, with the latest / min / max values of the store.
+   through every logged (step, value) point, with the latest / min / max values of the store.
 
 What should be seen is read from the store with MlflowClient first. Skips only where no Chromium is found
 ($REDSUP_CHROMIUM, chromium, chromium-browser, google-chrome).
@@ -22,6 +22,7 @@ import time
 from html.parser import HTMLParser
 from urllib.parse import quote
 
+import numpy as np
 import pytest
 
 from redsup.mlflow_ui import copy_store, find_chromium, mlflow_server
@@ -151,6 +152,39 @@ def test_table_parent_shows_its_children(chromium, server, expected, tmp_path):
         assert re.search(re.escape(link) + r"[^>]*>\s*" + re.escape(kid.info.run_name), html), kid.info.run_name
 
 
+def line_misses(path: str, history, tol_px: float = 2.0) -> list:
+    """The logged (step, value) points that an SVG polyline "x,yLx,y..." does not pass within ``tol_px``.
+
+    Plotly drops a vertex that lies on the straight line between its neighbours (``line.simplify``), so the
+    line may have fewer vertices than steps; what it must do is pass through every point. The x axis spans the
+    first to the last step; the y axis' linear map (range padding unknown) is fitted on the vertices, whose
+    x must each fall on a logged step. An empty list: the line draws the history."""
+    xy = np.array([[float(v) for v in p.split(",")] for p in path.split("L")])
+    steps = np.array([h.step for h in history], float)
+    values = np.array([h.value for h in history], float)
+    if len(xy) < 2 or xy[-1, 0] <= xy[0, 0]:
+        return ["fewer than two vertices"]
+    px_of_step = xy[0, 0] + (steps - steps[0]) / (steps[-1] - steps[0]) * (xy[-1, 0] - xy[0, 0])
+    at = np.abs(xy[:, 0][:, None] - px_of_step[None, :]).argmin(axis=1)
+    if np.abs(xy[:, 0] - px_of_step[at]).max() > tol_px or len(set(at)) != len(at):
+        return ["vertices off the logged steps"]
+    slope, offset = np.polyfit(values[at], xy[:, 1], 1)
+    if slope >= 0:                                        # larger values are higher up: smaller SVG y
+        return ["y axis not increasing upwards"]
+    drawn = np.interp(px_of_step, xy[:, 0], xy[:, 1])
+    return [int(s) for s, d, v in zip(steps, drawn, values) if abs(d - (slope * v + offset)) > tol_px]
+
+
+def test_line_misses_by_hand():
+    """A 4-step history on a 300 px wide, 100 px tall plot: y = 100 - 100 value."""
+    hist = [type("M", (), {"step": s, "value": v}) for s, v in [(1, 0.0), (2, 0.5), (3, 1.0), (4, 0.2)]]
+    assert line_misses("0,100L100,50L200,0L300,80", hist) == []
+    assert line_misses("0,100L200,0L300,80", hist) == []          # step 2 dropped: it lies on the line
+    hist[1].value = 0.9                                                   # now it does not
+    assert line_misses("0,100L200,0L300,80", hist) == [2]
+    assert line_misses("0,100L150,30L300,80", hist) == ["vertices off the logged steps"]
+
+
 def test_child_metric_page_plots_the_step_curve(chromium, server, expected, tmp_path):
     run, key, history = expected["curve"]["run"], expected["curve"]["key"], expected["curve"]["history"]
     as_json = lambda v: quote(json.dumps(v, separators=(",", ":")), safe="")     # as MLflow's own links
@@ -161,10 +195,11 @@ def test_child_metric_page_plots_the_step_curve(chromium, server, expected, tmp_
     url = f"{server}/#/metric?" + "&".join(f"{k}={v}" for k, v in query.items())
     html, text = page(chromium, tmp_path, url, run.info.run_name, f"{run.info.run_name} ({key})")
     assert run.info.run_name in text and f"{run.info.run_name} ({key})" in text, text[:3000]   # the legend
-    # the plotted line (plotly): one vertex per logged step
+    # the plotted line (plotly): every logged point lies on it
     lines = re.findall(r'<path class="js-line" d="M([^"]*)"', html)
     assert lines, "no plotted line"
-    assert len(history) in [line.count("L") + 1 for line in lines], (len(history), lines)
+    misdrawn = [line_misses(line, history) for line in lines]
+    assert [] in misdrawn, (misdrawn, lines)
     # the summary table: latest, min and max with their steps, as in the store
     m = re.search(re.escape(key) + r" (\S+) \(step=(\d+)\) (\S+) \(step=(\d+)\) (\S+) \(step=(\d+)\)",
                   text.split("Latest", 1)[-1])
