@@ -66,7 +66,8 @@ def parse_args(argv=None):
     p.add_argument("--input-scale", type=float, default=None)
     p.add_argument("--init-disparity", type=float, default=None, help="initial sigmoid output (depth.modes.*)")
     p.add_argument("--curriculum", type=int, default=0,
-                   help="resolution curriculum: first this many steps at half the input size (no lr decay), then --steps")
+                   help="resolution curriculum: first this many steps at half the input size (no lr decay; the "
+                        "auto-masking warm-up --automask-from in this phase), then --steps")
     p.add_argument("--automask-from", type=int, default=None,
                    help="auto-masking off for the first N steps (every pixel in the loss), then as configured "
                         "(default: the mode's automask_after)")
@@ -303,13 +304,14 @@ def main(argv=None) -> int:
         training.train(models, coarse, sources, steps=args.curriculum, batch_size=int(tcfg["batch_size"]),
                        lr=float(tcfg["lr"]), decay_at=2.0, gamma=float(tcfg["gamma"]), flip=tcfg["flip"],
                        min_speed=tcfg["min_speed"], seed=seed + 1, loss_kwargs=loss_kwargs, callback=on_step,
-                       device="cpu", criterion=None)
+                       device="cpu", criterion=None, automask_after=automask_after)
         validate(0)
+    fine_automask_after = 0 if args.curriculum > 0 else automask_after   # the warm-up belongs to the coarse phase
     summary = training.train(models, seqs, sources, steps=steps, batch_size=int(tcfg["batch_size"]),
                              lr=float(tcfg["lr"]), decay_at=tcfg["decay_at"], gamma=float(tcfg["gamma"]),
                              flip=tcfg["flip"], min_speed=tcfg["min_speed"], seed=seed, loss_kwargs=loss_kwargs,
                              callback=on_step, device="cpu", criterion=None, validate=validate,
-                             validate_every=args.val_every, automask_after=automask_after)
+                             validate_every=args.val_every, automask_after=fine_automask_after)
     wall = time.perf_counter() - t0
     final, best = val_rows[-1], min(val_rows, key=lambda r: r["abs_rel"])
     result = {"tag": args.tag, "seed_index": args.seed_index, "seed": seed, "wall_s": wall,
