@@ -49,14 +49,21 @@ def test_rows_of_every_table_at_default(cfg):
     labels = {r.label for r in rows["mccraith_ch4_table5"]}
     assert labels >= {"ours | M", "ours | S", "ours | MS", "Monodepth V2 [9] | S"}
     assert [r.label for r in rows["mccraith_ch4_table7"]] == ["baseline | 0", "Ours | 20", "Ours | 50"]
-    assert len(rows["galteland_table5_1"]) == 9 + 2  # Manydepth 3 x 3 domains, Feature Depth on Lyft and DDAD
-    assert {r.spec.model_mode for r in rows["galteland_table5_1"]} == {"MD", "FD"}
-    assert [r.label for r in rows["galteland_table4_4"]] == ["Front only", "Front+Back"]
-    assert [r.spec.model for r in rows["galteland_table4_4"]] == ["world_lyft/MD", "world_lyft/MD_frontback"]
-    t41 = rows["galteland_table4_1"]
+    # every Galteland model trains 3 seeds in default: each row once per seed, under one label
+    t51 = rows["galteland_table5_1"]
+    assert len({r.label for r in t51}) == 9 + 2  # Manydepth 3 x 3 domains, Feature Depth on Lyft and DDAD
+    assert len(t51) == 3 * (9 + 2)
+    assert {r.spec.model_mode for r in t51} == {"MD", "FD"}
+    t44 = [r for r in rows["galteland_table4_4"] if "/seed" not in r.spec.model]
+    assert [r.label for r in t44] == ["Front only", "Front+Back"]
+    assert [r.spec.model for r in t44] == ["world_lyft/MD", "world_lyft/MD_frontback"]
+    assert sorted(r.spec.model for r in rows["galteland_table4_4"] if r.label == "Front only") == [
+        "world_lyft/MD", "world_lyft/MD/seed1", "world_lyft/MD/seed2"]
+    t41 = [r for r in rows["galteland_table4_1"] if "/seed" not in r.spec.model]
     assert [r.label for r in t41] == ["Manydepth", "Feature Depth", "Manydepth single-frame teacher (ours)"]
     assert [r.spec.branch for r in t41] == ["", "", "teacher"]
     assert t41[2].spec.name == t41[0].spec.name + "_teacher" and t41[0].spec.key() != t41[2].spec.key()
+    assert len(rows["galteland_table4_1"]) == 3 * 3
     available, cameras = plan._available(cfg, _scenes_of(cfg))
     assert available["world_kitti"]["val"] == 1
     models = configs.trained_models(cfg["depth"], {d: a["train"] for d, a in available.items()}, cameras)
@@ -106,7 +113,8 @@ def test_tables_shrink_with_missing_data(cfg):
     assert not rows["mccraith_ch4_fig4"]
     assert not any(r.label.startswith("Odometry") for r in rows["mccraith_ch4_table6"])
     assert {r.label for r in rows["mccraith_ch4_table5"]} == {"ours | M", "Monodepth V2 [9] | M"}
-    assert len(rows["galteland_table5_1"]) == 4 + 1  # Manydepth Lyft / NAP-lab x Lyft / NAP-lab, Feature Depth Lyft
+    # Manydepth Lyft / NAP-lab x Lyft / NAP-lab, Feature Depth Lyft; each row once per seed (3 in default)
+    assert len({r.label for r in rows["galteland_table5_1"]}) == 4 + 1 and len(rows["galteland_table5_1"]) == 3 * 5
 
 
 def test_labels():
@@ -246,7 +254,10 @@ def test_seed_rows_are_averaged_with_their_spread(cfg):
     assert configs.parse_model("world_lyft/M_frontback/seed2") == ("world_lyft", "M_frontback", 2)
     with pytest.raises(ValueError, match="not a depth model id"):
         configs.parse_model("world_lyft/M/2")
-    assert plan.rows(cfg, _scenes_of(cfg))["galteland_table4_4"][1][1].startswith("baseline_world_lyft-MD_frontback_")
+    t44 = plan.rows(cfg, _scenes_of(cfg))["galteland_table4_4"]  # (label, run, step), once per seed of 3
+    assert [r[0] for r in t44] == ["Front only"] * 3 + ["Front+Back"] * 3
+    assert t44[3][1].startswith("baseline_world_lyft-MD_frontback_on_")
+    assert t44[4][1].startswith("baseline_world_lyft-MD_frontback-seed1_on_")
     assert configs.seed_models("world_lyft/MD", 2)[1] == "world_lyft/MD/seed1"
 
 
