@@ -382,3 +382,26 @@ def test_too_few_units_and_float_ties_are_inconclusive():
     assert math.isnan(lo) and "fewer than 3 units" in how
     assert tables.noise.verdict_of_interval(*tables.noise.difference_interval(0.3992, 0.3992 + 1e-12)[:2]) \
         == "inconclusive"
+
+
+def test_seed_records_of_the_same_models_pair_seed_by_seed():
+    """Adapted 0.142 / 0.129 / 0.137 vs baseline 0.164 / 0.142 / 0.150 (ch. 4 Table 5's MS rows, 3 seeds): per-seed
+    differences -0.022 / -0.013 / -0.013, mean -0.016, sd 0.0051962; half width t(2) 4.303 x 0.0051962 / sqrt(3)
+    = 0.012910, so [-0.028910, -0.003090]: the gain is beyond the noise when paired. Unpaired (Welch: variances
+    43e-6 and 124e-6, of the means 55.67e-6, df 3.24 -> t 3.182) the same numbers give -0.016 -+ 0.023741
+    (inconclusive), and so do records of different models."""
+    a, b = [0.142, 0.129, 0.137], [0.164, 0.142, 0.150]
+    ma, mb = sum(a) / 3, sum(b) / 3
+    na, nb = tables.noise.seeds(a, "world_kitti/MS"), tables.noise.seeds(b, "world_kitti/MS")
+    assert na["pair"] == "world_kitti/MS" and "pair" not in tables.noise.seeds(a)
+    lo, hi, how = tables.noise.difference_interval(ma, mb, na, nb)
+    assert how == "paired seeds"
+    assert lo == pytest.approx(-0.016 - 0.012910, abs=2e-6) and hi == pytest.approx(-0.016 + 0.012910, abs=2e-6)
+    assert tables.noise.verdict_of_interval(-hi, -lo) == "reproduces"  # lower is better: margin b - a > 0
+    for other in (tables.noise.seeds(b, "world_kitti/M"), tables.noise.seeds(b)):
+        lo2, hi2, how2 = tables.noise.difference_interval(ma, mb, na, other)
+        assert how2 == "seeds (unpaired)" and lo2 < 0 < hi2
+        assert lo2 == pytest.approx(-0.016 - 0.023741, abs=2e-6) and hi2 == pytest.approx(-0.016 + 0.023741, abs=2e-6)
+    # a different number of seeds cannot pair
+    _, _, how3 = tables.noise.difference_interval(ma, mb, na, tables.noise.seeds(b[:2], "world_kitti/MS"))
+    assert how3 == "seeds (unpaired)"

@@ -270,7 +270,9 @@ def table_frame(table_id: str, config: Mapping, rows: Sequence[tuple], results: 
         values = {c: [f[0].at[label, c] for f in frames if label in f[0].index] for c in ours.columns}
         for c, vals in values.items():
             ours.at[label, c] = float(np.mean(vals))
-        noise[label] = {col: noise_lib.seeds(values[col]) for col in METRIC_COLUMNS.values() if col in values}
+        # rows read from the same trained models (the label's base model, seed by seed) pair up
+        pair = by_label[label].spec.model
+        noise[label] = {col: noise_lib.seeds(values[col], pair) for col in METRIC_COLUMNS.values() if col in values}
     return TableFrame(ours, noise, table_note(config, tcfg, infos[0], max(seen.values()), models, timing))
 
 

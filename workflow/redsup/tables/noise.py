@@ -3,15 +3,18 @@
 A cell of ours may carry a ``Noise`` record (JSON-able dict):
 
 - ``{"kind": "seeds", "values": [v_seed0, v_seed1, ...]}``: the same configuration trained with different
-  seeds; the cell's value is their mean, its spread their standard deviation.
+  seeds; the cell's value is their mean, its spread their standard deviation. With ``"pair": KEY`` the k-th
+  value comes from the k-th trained model named by KEY (e.g. a depth model's seeds): two rows read from the same
+  trained models (a baseline and its adaptation, Manydepth and its own teacher) are paired seed by seed.
 - ``{"kind": "bootstrap", "values": [r_1, ..., r_B], "units": DIGEST}``: the metric recomputed on B
   resamples (with replacement) of the evaluation units (frames, objects, tracks). The resample indices are
   a function of the sorted unit ids only (``resample_indices``), so two rows evaluated on the same units
   (same ``units`` digest) share their resamples and their replicate differences form a *paired* bootstrap.
 
 ``difference_interval(a, b)`` is the 95 % interval of ``a - b``: paired bootstrap quantiles when both are
-bootstrap records on the same units, otherwise a Welch-style normal / t interval from the two variances
-(seed std² / n, bootstrap variance). Without any noise record the interval is the point difference.
+bootstrap records on the same units; a paired t interval of the per-seed differences when both are seed
+records of the same trained models (same ``pair``); otherwise a Welch-style normal / t interval from the two
+variances (seed std² / n, bootstrap variance). Without any noise record the interval is the point difference.
 """
 from __future__ import annotations
 
@@ -68,9 +71,13 @@ def bootstrap(per_unit: Mapping | None = None, *, unit_ids: Sequence | None = No
             "n_units": len(per_unit)}
 
 
-def seeds(values: Sequence[float]) -> dict:
-    """Seed record of one cell (one value per training seed)."""
-    return {"kind": "seeds", "values": [float(v) for v in values]}
+def seeds(values: Sequence[float], pair: str | None = None) -> dict:
+    """Seed record of one cell (one value per training seed); ``pair`` names the trained models the values
+    come from, in seed order (records with the same ``pair`` are compared seed by seed)."""
+    rec = {"kind": "seeds", "values": [float(v) for v in values]}
+    if pair is not None:
+        rec["pair"] = str(pair)
+    return rec
 
 
 def spread(noise: Mapping | None) -> float | None:
@@ -122,6 +129,14 @@ def difference_interval(a: float, b: float, noise_a: Mapping | None = None,
         # basic (pivot-free) percentile interval of the paired replicate differences, centred on d
         lo, hi = np.quantile(diff - diff.mean(), [(1 - LEVEL) / 2, (1 + LEVEL) / 2])
         return d + float(lo), d + float(hi), "paired bootstrap"
+    if (noise_a and noise_b and noise_a["kind"] == noise_b["kind"] == "seeds" and noise_a.get("pair")
+            and noise_a.get("pair") == noise_b.get("pair")
+            and len(noise_a["values"]) == len(noise_b["values"]) >= 2):
+        diff = np.asarray(noise_a["values"], float) - np.asarray(noise_b["values"], float)
+        if not np.all(np.isfinite(diff)):
+            return math.nan, math.nan, "non-finite"
+        half = t975(len(diff) - 1) * float(np.std(diff, ddof=1)) / math.sqrt(len(diff))
+        return d - half, d + half, "paired seeds"
     va, dfa = _var_of_mean(noise_a)
     vb, dfb = _var_of_mean(noise_b)
     if va == 0.0 and vb == 0.0:
