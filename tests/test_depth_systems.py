@@ -144,6 +144,30 @@ def test_train_settings_mode_recipe_between_base_and_model_entry():
     assert model.get("input_scale", 1.0) == 1.0 and train["steps"] == 600
 
 
+def test_a_mode_may_select_its_best_validation_pass():
+    """depth.modes.<mode>.epochs: validation passes (best kept) for a Monodepth2 mode, and over its system's
+    epochs; the training job then reads the val scenes' images and LiDAR depth, a mode without passes does not."""
+    from redsup.depth.configs import train_inputs
+
+    cfg = {"model": {"base_channels": 16, "num_scales": 4, "min_depth": 0.1, "max_depth": 100.0},
+           "train": {"steps": 600, "batch_size": 4, "lr": 1e-4, "decay_at": 0.75, "gamma": 0.1},
+           "modes": {"M": {"sources": ["prev", "next"], "cameras": ["cam_front"], "epochs": 12},
+                     "S": {"sources": ["stereo"], "cameras": ["cam_front"]},
+                     "MD": {"sources": ["prev", "next"], "cameras": ["cam_front"], "system": "manydepth", "epochs": 0},
+                     "MD2": {"sources": ["prev", "next"], "cameras": ["cam_front"], "system": "manydepth"}},
+           "systems": {"manydepth": {"epochs": 20}},
+           "eval": {"camera": "cam_front"},
+           "models": []}
+    assert [train_settings(cfg, "a", m)[1]["epochs"] for m in ("M", "S", "MD", "MD2")] == [12, 0, 0, 20]
+    scenes = ["train_000", "val_000", "test_000"]
+    files = train_inputs({"depth": cfg}, "a", "M", scenes)
+    assert files["scenes"] == ["results/raw/a/train_000"]
+    assert files["val_images"] == ["results/prepared/a/val_000/cam_front.npz"]
+    assert files["val_gt"] == ["results/prepared/a/val_000/cam_front_depth.npz"]
+    assert "val_images" not in train_inputs({"depth": cfg}, "a", "S", scenes)
+    assert "val_images" not in train_inputs({"depth": cfg}, "a", "M", ["train_000", "test_000"])
+
+
 def test_figures_draw_without_validation_history(tmp_path):
     from redsup.depth import galteland_figures as gf
 

@@ -130,11 +130,20 @@ SYSTEM_MODEL_KEYS = ("base_channels", "n_bins", "range_init", "range_momentum", 
 SYSTEM_TRAIN_KEYS = ("steps", "batch_size", "lr", "decay_at", "gamma", "epochs")
 
 
+def train_epochs(depth_cfg: Mapping, mode: str) -> int:
+    """Validation passes of a mode's training (0 = none, the last step's weights are kept): the mode's
+    ``epochs``, else its system's ``depth.systems.<system>.epochs``."""
+    mode_cfg = depth_cfg["modes"][mode]
+    if "epochs" in mode_cfg:
+        return int(mode_cfg["epochs"])
+    return int(system_settings(depth_cfg, system_of(depth_cfg, mode)).get("epochs", 0))
+
+
 def train_settings(depth_cfg: Mapping, dataset: str, mode: str) -> tuple[dict, dict]:
     """(model settings, training settings) of one model: ``depth.model`` / ``depth.train`` overridden by the
     system's ``depth.systems.<system>``, then by the mode's ``input_scale`` / ``steps`` and then by the model
     entry's ``steps``; ``automask_after`` is the mode's (default 0). The model settings name the ``system``; the training settings hold ``epochs``
-    (validation passes; 0 = none) for the systems that select their best epoch on the validation split."""
+    (validation passes, the best one kept; 0 = none: ``train_epochs``)."""
     system = system_of(depth_cfg, mode)
     sset = system_settings(depth_cfg, system)
     mode_cfg = depth_cfg["modes"][mode]
@@ -142,7 +151,8 @@ def train_settings(depth_cfg: Mapping, dataset: str, mode: str) -> tuple[dict, d
     model["init_disparity"] = mode_cfg.get("init_disparity", depth_cfg["model"].get("init_disparity"))
     if "input_scale" in mode_cfg:
         model["input_scale"] = float(mode_cfg["input_scale"])
-    train = {**depth_cfg["train"], "epochs": 0, **{k: sset[k] for k in SYSTEM_TRAIN_KEYS if k in sset}}
+    train = {**depth_cfg["train"], "epochs": train_epochs(depth_cfg, mode),
+             **{k: sset[k] for k in SYSTEM_TRAIN_KEYS if k in sset and k != "epochs"}}
     steps = next((m["steps"] for m in depth_cfg["models"]
                   if m["dataset"] == dataset and m["mode"] == mode and m.get("steps")), mode_cfg.get("steps"))
     if steps:
@@ -262,8 +272,8 @@ def split_of(scenes: Seq[str], split: str) -> list[str]:
 
 def train_inputs(config: Mapping, dataset: str, mode: str, scenes: Seq[str]) -> dict[str, list[str]]:
     """Inputs of ``train_depth``: the raw scenes (ego poses, extrinsics) and the prepared images of every
-    camera the mode trains on (``stereo``: the partner images); for a system with validation passes
-    (``depth.systems.<system>.epochs``) the ``val`` scenes' images and LiDAR depth. ``mode`` without the seed
+    camera the mode trains on (``stereo``: the partner images); for a mode with validation passes
+    (``train_epochs``) the ``val`` scenes' images and LiDAR depth. ``mode`` without the seed
     part."""
     mode_cfg = config["depth"]["modes"][mode]
     all_scenes, scenes = scenes, split_of(scenes, "train")
@@ -272,8 +282,7 @@ def train_inputs(config: Mapping, dataset: str, mode: str, scenes: Seq[str]) -> 
         files[cam] = [f"results/prepared/{dataset}/{s}/{cam}.npz" for s in scenes]
     if "stereo" in mode_cfg["sources"]:
         files["stereo"] = [f"results/prepared/{dataset}/{s}/cam_front_right.npz" for s in scenes]
-    system = config["depth"]["modes"][mode].get("system", "monodepth2")
-    epochs = system_settings(config["depth"], system).get("epochs", 0)
+    epochs = train_epochs(config["depth"], mode)
     val = split_of(all_scenes, "val")
     if epochs and val:  # validation passes (best epoch on val): the val scenes' images and LiDAR depth
         cam = config["depth"]["eval"]["camera"]

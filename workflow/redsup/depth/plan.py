@@ -296,16 +296,19 @@ def _monodepth2_sizes(depth_cfg: Mapping, models: Sequence[str]) -> str:
     """Input size and steps of the table's Monodepth2 models, grouped: "M: input 0.5 x the prepared size, 2400
     steps; S, MS: input 1 x ..., 600 steps" (every trained Monodepth2 model when ``models`` is empty)."""
     ids = [parse_model(m)[:2] for m in models] or [(m["dataset"], m["mode"]) for m in depth_cfg["models"]]
-    groups: dict[tuple[float, int], list[str]] = {}
+    groups: dict[tuple[float, int, int], list[str]] = {}
     for dataset, mode in ids:
         if system_of(depth_cfg, mode) != "monodepth2":
             continue
         model, train = train_settings(depth_cfg, dataset, mode)
-        modes = groups.setdefault((float(model.get("input_scale", 1.0)), int(train["steps"])), [])
+        key = (float(model.get("input_scale", 1.0)), int(train["steps"]), int(train["epochs"]))
+        modes = groups.setdefault(key, [])
         if mode not in modes:
             modes.append(mode)
     return "; ".join(f"{', '.join(modes)}: input {scale:g} x the prepared size, {steps} steps"
-                     for (scale, steps), modes in groups.items())
+                     + (f" with {epochs} validation passes on the val split, the weights of the pass with the lowest "
+                        "val Abs Rel kept" if epochs else "")
+                     for (scale, steps, epochs), modes in groups.items())
 
 
 def table_note(config: Mapping, table_cfg: Mapping, info: Mapping, seeds: int = 1, models: Sequence[str] = (),
