@@ -437,6 +437,30 @@ def test_geometric_diagnosis_on_exact_boxes_by_hand():
     assert "backward difference" in note and f"{n['E_v_diff_far']:.3g}" in note
 
 
+def test_scale_signal_by_hand():
+    """The v_z a track's size change implies, by hand, and its correlation with the truth: about 1 on exact boxes,
+    falling when the far boxes' size jitters by a pixel."""
+    from redsup.velocity.diagnosis import scale_signal, scale_velocity
+
+    # T = 4 frames at 1 fps: size 10 at the first frame, 8 at frame T - 1 (index 2), Z = 20 m at the last frame:
+    # Z_1 = 20 x 8 / 10 = 16 m, v_z = (20 - 16) / 2 s = 2 m/s
+    boxes = np.array([[[0, 0, 10, 10], [0, 0, 9, 9], [0, 0, 8, 8], [0, 0, 7.9, 7.9]]], float)
+    assert scale_velocity(boxes, np.array([20.0]), 1.0) == pytest.approx([2.0])
+    assert np.isnan(scale_velocity(boxes * [1, 1, 0, 1], np.array([20.0]), 1.0)[0])
+    tracks = _fake_training(n=60, seed=4)
+    exact = scale_signal(tracks, FPS)
+    for b in ("near", "medium", "far"):
+        assert exact[f"scale_corr_{b}"] > 0.99
+    far = tracks.bins == 2
+    assert exact["box_px_far"] == pytest.approx(np.median(tracks.boxes[far, -2, 3]))
+    noisy = tracks.subset(np.ones(len(tracks), bool))
+    noisy.boxes = noisy.boxes.copy()
+    rng = np.random.default_rng(0)
+    noisy.boxes[:, :, 2:] += rng.normal(0.0, 1.0, noisy.boxes[:, :, 2:].shape)
+    jittered = scale_signal(noisy, FPS)
+    assert jittered["scale_corr_far"] < exact["scale_corr_far"] - 0.05
+
+
 def test_smoothing_protocol_per_training_data():
     from redsup.velocity.experiment import smoothing_of
 

@@ -11,7 +11,10 @@ For every split, on the MedianFlow boxes of every annotated vehicle:
   Z^2 / (fy H) (m per px) at the bin's median distance: a tracker jitter of one pixel in the bottom edge
   moves the far ground point by that much, and the backward difference multiplies it by the frame rate;
 - the median distance the box bottom truly moves over the clip, fy H |v_z| (T - 1) / fps / Z^2 (px): what
-  any box-based estimator has to resolve.
+  any box-based estimator has to resolve;
+- the tracker's scale signal (`scale_signal`): the median height of the last tracked box (px) and the correlation
+  of the velocity its size change implies with the true v_z, over the vehicles tracked without failure: the
+  information on v_z a box-based MLP can draw from the tracks, and how it fades with the box's pixel size.
 """
 from __future__ import annotations
 
@@ -25,12 +28,46 @@ from redsup.velocity.smoothing import gaussian_smooth
 VARIANTS = {"diff": (2, 0.0), "lsq10": (10, 0.0), "smooth5_diff": (2, 5.0)}
 
 
+def scale_velocity(boxes: np.ndarray, distance: np.ndarray, fps: float) -> np.ndarray:
+    """(N,) v_z implied by the size change of tracks (N, T, 4) between the first frame and the last tracked one
+    (frame T - 1; frame T is the annotation the tracker starts from), at the last frame's distance Z: the
+    apparent size s (sqrt of w h) falls as 1 / Z, so Z_1 = Z s_(T-1) / s_1 and v_z = Z (1 - s_(T-1) / s_1) / t
+    with t = (T - 2) / fps. NaN where a size is not positive."""
+    size = np.sqrt(np.clip(boxes[:, :, 2], 0, None) * np.clip(boxes[:, :, 3], 0, None))
+    first, last = size[:, 0], size[:, -2]
+    t = (boxes.shape[1] - 2) / fps
+    with np.errstate(divide="ignore", invalid="ignore"):
+        v = distance * (1.0 - last / first) / t
+    return np.where((first > 0) & (last > 0), v, np.nan)
+
+
+def scale_signal(tracks: TrackSet, fps: float) -> dict[str, float]:
+    """Flat dict per bin: box_px_<bin> (median height of the last tracked box, px) and scale_corr_<bin> (Pearson
+    correlation of `scale_velocity` with the true v_z over the bin's vehicles tracked without failure; NaN
+    below 3 of them)."""
+    out: dict[str, float] = {}
+    if len(tracks) == 0 or tracks.boxes.shape[1] < 3:
+        return out
+    v = scale_velocity(tracks.boxes, tracks.position[:, 1], fps)
+    for k, b in enumerate(BIN_NAMES):
+        sel = tracks.bins == k
+        if not sel.any():
+            continue
+        out[f"box_px_{b}"] = float(np.median(tracks.boxes[sel, -2, 3]))
+        ok = sel & ~tracks.tracker_failed & np.isfinite(v)
+        x, y = v[ok], tracks.velocity[ok, 1]
+        out[f"scale_corr_{b}"] = (float(np.corrcoef(x, y)[0, 1]) if ok.sum() >= 3 and x.std() > 0 and y.std() > 0
+                                  else float("nan"))
+    return out
+
+
 def geometric_diagnosis(tracks: TrackSet, fps: float) -> dict[str, float]:
     """Flat dict (see module doc): E_v_<variant>_<bin>, E_v_<variant>, E_p_<bin>, horizon_px_<bin>,
-    dz_per_px_<bin>, n_<bin>."""
+    dz_per_px_<bin>, motion_px_<bin>, n_<bin>, and `scale_signal`'s box_px_<bin>, scale_corr_<bin>."""
     out: dict[str, float] = {}
     if len(tracks) == 0:
         return out
+    out.update(scale_signal(tracks, fps))
     calib = tracks.calib
     for name, (window, sigma) in VARIANTS.items():
         boxes = gaussian_smooth(tracks.boxes, sigma) if sigma > 0 else tracks.boxes
@@ -72,4 +109,6 @@ def diagnosis_note(metrics: dict, split: str = "test") -> str:
             f"10-frame least squares {row('E_v_lsq10')}, backward difference of sigma-5-smoothed boxes "
             f"{row('E_v_smooth5_diff')}; E_p of the annotated box (flat-road assumption only) {row('E_p')} m^2; "
             f"box bottom {row('horizon_px')} px below the horizon, dZ/dv {row('dz_per_px')} m per px, "
-            f"true motion of the box bottom over the clip {row('motion_px')} px (medians)")
+            f"true motion of the box bottom over the clip {row('motion_px')} px (medians); the tracker's scale "
+            f"signal: last tracked box {row('box_px')} px high (median), correlation of the v_z its size change "
+            f"implies with the true v_z {row('scale_corr')} (the information a box-based MLP can use)")
