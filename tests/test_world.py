@@ -22,7 +22,7 @@ from redsup.world.motorway import build_motorway
 from redsup.world.prims import KIND_BUILDING, Prims, car_parts, car_prims
 from redsup.world.raycast import cast
 from redsup.world.road import PART_ROAD, Road
-from redsup.world.sensors import R_VEHICLE_FRONT, Camera, Lidar, intrinsics
+from redsup.world.sensors import R_VEHICLE_FRONT, Camera, Lidar, fine_camera, intrinsics
 from redsup.world.shade import SceneView, render_camera
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -368,6 +368,80 @@ def test_clips_have_40_frames_and_pinhole_consistent_annotations(cfg, tmp_path):
             assert b["left"] - 1 <= cx + fx * x / z <= b["right"] + 1
             assert np.hypot(*ann["velocity"]) < 8.0
     assert n_ann >= 2 and summary["annotated"] == n_ann
+
+
+def test_fine_camera_grid_by_hand(cfg):
+    """k = 2: f doubles and pixel (u, v) covers fine pixels 2u, 2u + 1: the fine pixel 2u looks where the camera
+    shifted by a quarter pixel (c + 0.25) puts pixel u, so their ray-cast depth buffers agree ray for ray."""
+    K = np.array([[2.0, 0.0, 1.5], [0.0, 2.0, 0.5], [0.0, 0.0, 1.0]])
+    cam = Camera("c", K, 4, 2, np.eye(4))
+    fine = fine_camera(cam, 2)
+    assert (fine.width, fine.height) == (8, 4) and fine_camera(cam, 1) is cam
+    assert np.allclose(fine.K, [[4.0, 0.0, 3.5], [0.0, 4.0, 1.5], [0.0, 0.0, 1.0]])
+    p = np.array([0.3, -0.2, 1.0])                     # a camera-frame point: u = 2.1, v = 0.1 on cam
+    u, v = (K @ p)[:2]
+    uf, vf = (fine.K @ p)[:2]
+    assert (uf, vf) == pytest.approx(((u + 0.5) * 2 - 0.5, (v + 0.5) * 2 - 0.5))
+    w, h = 48, 24
+    size = np.array([[3.9, 1.6, 1.5]])
+    view = flat_view(cfg, cars=car_table(size))
+    prims = car_prims([[9.0, 0.5, 0.0]], np.eye(3)[None], size, np.array([0]))
+    base = Camera("cam_front", intrinsics(w, h, 80.0), w, h, pose(R_VEHICLE_FRONT, [0.0, 0.0, 1.6]))
+    shifted = Camera("cam_front", base.K + np.array([[0, 0, 0.25], [0, 0, 0.25], [0, 0, 0]]), w, h,
+                     base.T_vehicle_sensor)
+    T_wc = base.T_vehicle_sensor
+    fine_hits = cast(fine_camera(base, 2), T_wc, prims, view.road, 100.0)[0]
+    shifted_hits = cast(shifted, T_wc, prims, view.road, 100.0)[0]
+    assert np.array_equal(fine_hits.t.reshape(2 * h, 2 * w)[0::2, 0::2], shifted_hits.t.reshape(h, w))
+    assert np.array_equal(fine_hits.prim.reshape(2 * h, 2 * w)[0::2, 0::2], shifted_hits.prim.reshape(h, w))
+
+
+def test_supersampled_clip_pixels_integrate_their_area(cfg, tmp_path):
+    """supersample 2: the image keeps the camera's size and the calibration, a pixel is the mean of its four
+    rays in linear colour (noise off, gamma 1 identity look: the 2 x 2 block mean of the fine render), and the
+    annotated boxes lie on the half-pixel grid (sub-pixel), still consistent with eq. (1)."""
+    world = copy.deepcopy(cfg["world"])
+    clips = copy.deepcopy(cfg["velocity_clips"])
+    clips.update(width=160, height=90, frames=2, supersample=2)
+    clips["splits"]["train"] = {"clips": 2, "velocity_scale": 1.0}
+    write_clips(world, clips, "train", 5, tmp_path / "ss")
+    plain = dict(clips, supersample=1)
+    write_clips(world, plain, "train", 5, tmp_path / "plain")
+    cal = [(p / "calibration.txt").read_text() for p in (tmp_path / "ss", tmp_path / "plain")]
+    assert cal[0] == cal[1]
+    fx, fy, cx, cy = (float(v) for v in cal[0].split("\n")[0].split())
+    height = float(cal[0].split("\n")[1])
+    img = cv2.imread(str(tmp_path / "ss" / "clips" / "1" / "imgs" / "002.png"))
+    assert img.shape == (90, 160, 3)
+    boxes = []
+    for k in (1, 2):
+        for ann in json.loads((tmp_path / "ss" / "clips" / str(k) / "annotation.json").read_text()):
+            b, (z, _) = ann["bbox"], ann["position"]
+            boxes += [b["left"], b["top"], b["right"], b["bottom"]]
+            assert b["bottom"] == pytest.approx(cy + fy * height / z, abs=1.0)
+    halves = np.asarray(boxes) * 2
+    assert len(boxes) >= 4 and np.allclose(halves, np.round(halves))
+    assert not np.allclose(np.asarray(boxes) + 0.5, np.round(np.asarray(boxes) + 0.5))   # some off the pixel grid
+
+
+def test_supersample_averages_linear_colour(cfg):
+    """render_camera(k = 2) = the domain look of the 2 x 2 block means of the fine grid's linear colour."""
+    from redsup.world.shade import finish, radiance
+
+    size = np.array([[3.9, 1.6, 1.5]])
+    view = flat_view(cfg, cars=car_table(size))
+    prims = car_prims([[9.0, 0.5, 0.0]], np.eye(3)[None], size, np.array([0]))
+    w, h = 32, 16
+    cam = Camera("cam_front", intrinsics(w, h, 80.0), w, h, pose(R_VEHICLE_FRONT, [0.0, 0.0, 1.6]))
+    look = cfg["world"]["domains"]["kitti_like"]["appearance"]
+    T = cam.T_vehicle_sensor
+    out = render_camera(cam, T, prims, view, look, 0.0, 100.0, 500.0, derive_rng(1), supersample=2)
+    lin = radiance(fine_camera(cam, 2), T, prims, view, look, 100.0, 500.0)["linear"]
+    block = lin.reshape(h, 2, w, 2, 3).mean(axis=(1, 3)).reshape(-1, 3)
+    assert out["rgb"].shape == (h, w, 3) and out["instance"].shape == (2 * h, 2 * w)
+    assert np.array_equal(out["rgb"], finish(block, look, 0.0, derive_rng(1)).reshape(h, w, 3))
+    edge = (out["instance"].reshape(h, 2, w, 2) > 0).mean(axis=(1, 3))
+    assert ((edge > 0) & (edge < 1)).any()          # pixels the car covers in part: their grey is a mix
 
 
 def test_abnormal_velocity_scale(cfg):

@@ -28,13 +28,18 @@ def clip_camera(world_cfg: dict, ccfg: dict) -> Camera:
     return Camera("cam_front", K, ccfg["width"], ccfg["height"], T)
 
 
-def annotate(mw, state, cam: Camera, rendered: dict, ccfg: dict) -> list[dict]:
-    """Annotations of the last frame: every car sufficiently visible and within the distance range."""
+def annotate(mw, state, cam: Camera, rendered: dict, ccfg: dict, supersample: int = 1) -> list[dict]:
+    """Annotations of the last frame: every car sufficiently visible and within the distance range. With
+    ``supersample`` k the rendered buffers are the k-times finer grid (``shade.render_camera``): visible pixels
+    count k^2 fine pixels to one, and the tight box is mapped to the camera's pixels ((x + 0.5) / k - 0.5)."""
     n = len(mw.cars["size"])
     if n == 0:
         return []
-    own = own_pixels(rendered["pairs"], state.prims, n)
+    fine = supersample ** 2                             # fine pixels per camera pixel
+    own = own_pixels(rendered["pairs"], state.prims, n) / fine
     count, box = instance_boxes(rendered["instance"], n)
+    count = count / fine
+    box = (box + 0.5) / supersample - 0.5
     T_vw = np.linalg.inv(state.T_world_vehicle)
     cam_v = cam.T_vehicle_sensor[:3, 3]
     ego_vel = mw.ego.velocity[-1]
@@ -42,8 +47,8 @@ def annotate(mw, state, cam: Camera, rendered: dict, ccfg: dict) -> list[dict]:
     out = []
     for k in range(n):
         tid = int(mw.cars["track_id"][k])
-        vis = int(count[tid])
-        if vis < ccfg["min_visible_px"] or vis < ccfg["min_visible_fraction"] * max(int(own[k]), 1):
+        vis = float(count[tid])
+        if vis < ccfg["min_visible_px"] or vis < ccfg["min_visible_fraction"] * max(float(own[k]), 1.0):
             continue
         # the point of the car nearest the camera along its heading, at ground level (face centre)
         fwd = state.car_rot[k, :, 0]
@@ -91,9 +96,10 @@ def write_clips(world_cfg: dict, clips_cfg: dict, split: str, seed: int, out_dir
                 state = motorway_state(mw, i)
                 T_wc = state.T_world_vehicle @ cam.T_vehicle_sensor
                 out = render_camera(cam, T_wc, state.prims, view, dom["appearance"], world_cfg["pixel_noise"],
-                                    clips_cfg["render_distance"], world_cfg["fog_distance"], rng)
+                                    clips_cfg["render_distance"], world_cfg["fog_distance"], rng,
+                                    supersample=int(clips_cfg.get("supersample", 1)))
                 write_png(folder / f"{i + 1:03d}.png", out["rgb"])
-            ann = annotate(mw, state, cam, out, clips_cfg)
+            ann = annotate(mw, state, cam, out, clips_cfg, int(clips_cfg.get("supersample", 1)))
             (folder.parent / "annotation.json").write_text(json.dumps(ann, indent=1))
             for a in ann:
                 z = a["position"][0]

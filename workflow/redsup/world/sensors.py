@@ -33,6 +33,19 @@ def intrinsics(width: int, height: int, hfov_deg: float) -> np.ndarray:
     return np.array([[f, 0.0, (width - 1) / 2.0], [0.0, f, (height - 1) / 2.0], [0.0, 0.0, 1.0]])
 
 
+def fine_camera(cam: "Camera", k: int) -> "Camera":
+    """The same camera on a k-times finer pixel grid: pixel (u, v) of ``cam`` covers the k x k fine pixels
+    (k u .. k u + k - 1, k v .. k v + k - 1), so f becomes k f and the principal point (c + 0.5) k - 0.5."""
+    if k == 1:
+        return cam
+    K = cam.K.astype(np.float64).copy()
+    K[0, 0] *= k
+    K[1, 1] *= k
+    K[0, 2] = (K[0, 2] + 0.5) * k - 0.5
+    K[1, 2] = (K[1, 2] + 0.5) * k - 0.5
+    return Camera(cam.name, K, cam.width * k, cam.height * k, cam.T_vehicle_sensor)
+
+
 @dataclass
 class Camera:
     name: str

@@ -16,6 +16,7 @@ from .common import rotate
 from .prims import CAR_KINDS, KIND_BARRIER, KIND_BUILDING, KIND_POLE, KIND_RAIL, KIND_TRUNK, Prims
 from .raycast import GROUND, cast
 from .road import PART_KERB, Road
+from .sensors import fine_camera
 
 FILTER_PX = 1.0  # texture band limit in pixels (octaves fade out between 1 and 2 footprints)
 COS_POWER = 0.75  # footprint between the geometric mean (0.5) and the major axis (1) of the pixel ellipse
@@ -132,9 +133,30 @@ def sky_image(cam, T_world_cam: np.ndarray, style: textures.Style, step: int = 4
 
 
 def render_camera(cam, T_world_cam: np.ndarray, prims: Prims, view: SceneView, appearance: dict,
-                  pixel_noise: float, render_distance: float, fog_distance: float, rng: np.random.Generator):
+                  pixel_noise: float, render_distance: float, fog_distance: float, rng: np.random.Generator,
+                  supersample: int = 1):
     """Render one camera: dict(rgb (H,W,3) uint8, label uint8, instance uint16, depth float32 metres
-    (0 = none)), plus the casting results (hits, pairs) for ground-truth bookkeeping."""
+    (0 = none)), plus the casting results (hits, pairs) for ground-truth bookkeeping.
+
+    ``supersample`` k > 1: every pixel integrates k x k rays, as a sensor pixel integrates the light over its area
+    (anti-aliased silhouettes whose sub-pixel position shows in the grey levels): the scene is cast on the
+    camera's k-times finer grid (``sensors.fine_camera``), averaged in linear colour, and only then given the
+    domain look and the sensor noise at the camera's own pixels. label, instance, depth, hits and pairs are
+    then those of the fine grid (kH x kW)."""
+    fine = fine_camera(cam, supersample)
+    out = radiance(fine, T_world_cam, prims, view, appearance, render_distance, fog_distance)
+    linear = out.pop("linear")
+    if supersample > 1:
+        k = supersample
+        linear = linear.reshape(cam.height, k, cam.width, k, 3).mean(axis=(1, 3)).reshape(-1, 3)
+    out["rgb"] = finish(linear, appearance, pixel_noise, rng).reshape(cam.height, cam.width, 3)
+    return out
+
+
+def radiance(cam, T_world_cam: np.ndarray, prims: Prims, view: SceneView, appearance: dict,
+             render_distance: float, fog_distance: float) -> dict:
+    """Cast and shade one camera's pixel grid: dict(linear (H*W, 3) float32 colour before the domain look, label,
+    instance, depth (H, W), hits, pairs)."""
     hits, pairs, dirs = cast(cam, T_world_cam, prims, view.road, render_distance)
     origin = T_world_cam[:3, 3]
     n = cam.n_rays
@@ -166,6 +188,5 @@ def render_camera(cam, T_world_cam: np.ndarray, prims: Prims, view: SceneView, a
     depth = np.zeros(n, np.float32)
     depth[idx] = t
     H, W = cam.height, cam.width
-    return {"rgb": finish(rgb, appearance, pixel_noise, rng).reshape(H, W, 3),
-            "label": label.reshape(H, W), "instance": instance.reshape(H, W), "depth": depth.reshape(H, W),
-            "hits": hits, "pairs": pairs}
+    return {"linear": rgb, "label": label.reshape(H, W), "instance": instance.reshape(H, W),
+            "depth": depth.reshape(H, W), "hits": hits, "pairs": pairs}
