@@ -3,13 +3,14 @@ test): issue 11 §2, "MLP-tracker E_v <= 0.5 x the constant predictor".
 
 Renders the first ``--clips`` clips of a velocity clip split (the project's world and seeds; the velocity
 clips' camera at each ``--widths`` x 9 / 16, the same field of view, ``min_visible_px`` scaled with the pixel
-area so the same vehicles are annotated), tracks them with the project's MedianFlow step, and prints per
-distance bin (``redsup.velocity.diagnosis``): the median height of the last tracked box (px), the correlation
-of the v_z its size change implies with the true v_z (the signal a box-based MLP can learn from), the median
-true motion of the box bottom over the clip (px) and the render / tracking seconds. No model is trained.
+area so the same vehicles are annotated) with each ``--supersample`` (rays per pixel along each axis), tracks
+them with the project's MedianFlow step, and prints per distance bin (``redsup.velocity.diagnosis``): the median
+height of the last tracked box (px), the correlation of the v_z its size change implies with the true v_z (the
+signal a box-based MLP can learn from), the median true motion of the box bottom over the clip (px) and the
+render / tracking seconds. No model is trained.
 
     python benchmarks/bench_velocity_resolution.py                          # 20 test clips, 320 / 640 / 1280
-    python benchmarks/bench_velocity_resolution.py --clips 40 --widths 320 640 --split val
+    python benchmarks/bench_velocity_resolution.py --clips 40 --widths 320 --supersample 1 2 --split val
 """
 from __future__ import annotations
 
@@ -31,19 +32,20 @@ from redsup.velocity.metrics import BIN_NAMES  # noqa: E402
 from redsup.world.clips import write_clips  # noqa: E402
 
 
-def measure(cfg: dict, width: int, split: str, clips: int, workdir: Path) -> dict:
+def measure(cfg: dict, width: int, split: str, clips: int, workdir: Path, supersample: int = 1) -> dict:
     ccfg = copy.deepcopy(cfg["velocity_clips"])
+    ccfg["supersample"] = supersample
     base_w = ccfg["width"]
     ccfg["width"], ccfg["height"] = width, width * 9 // 16
     ccfg["min_visible_px"] = int(round(ccfg["min_visible_px"] * (width / base_w) ** 2))
     ccfg["splits"] = {split: {**ccfg["splits"][split], "clips": clips}}
-    out = workdir / f"w{width}"
+    out = workdir / f"w{width}_k{supersample}"
     t0 = time.perf_counter()
     write_clips(cfg["world"], ccfg, split, cfg["seed"], out)
     t1 = time.perf_counter()
-    write_medianflow(out, workdir / f"w{width}.npz", cfg["detection"]["medianflow"])
+    write_medianflow(out, out.with_suffix(".npz"), cfg["detection"]["medianflow"])
     t2 = time.perf_counter()
-    tracks = load_split(workdir / f"w{width}.npz", out, cfg["velocity"]["min_box_px"])
+    tracks = load_split(out.with_suffix(".npz"), out, cfg["velocity"]["min_box_px"])
     d = geometric_diagnosis(tracks, float(ccfg["fps"]))
     return {**d, "render_s_per_clip": (t1 - t0) / clips, "track_s_per_clip": (t2 - t1) / clips,
             "vehicles": len(tracks), "failed": int(tracks.tracker_failed.sum())}
@@ -55,24 +57,27 @@ def main(argv=None) -> None:
     p.add_argument("--split", default="test")
     p.add_argument("--clips", type=int, default=20)
     p.add_argument("--widths", type=int, nargs="+", default=[320, 640, 1280])
+    p.add_argument("--supersample", type=int, nargs="+", default=[1],
+                   help="rays per pixel along each axis (velocity_clips.supersample), every width with each")
     args = p.parse_args(argv)
     cfg = rconfig.load(args.config)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for w in args.widths:
-            r = measure(cfg, w, args.split, args.clips, Path(tmp))
-            rows.append((w, r))
-            print(f"{w} x {w * 9 // 16}: {r['vehicles']} vehicles ({r['failed']} tracker failures), "
+            for k in args.supersample:
+                r = measure(cfg, w, args.split, args.clips, Path(tmp), k)
+                rows.append((w, k, r))
+                print(f"{w} x {w * 9 // 16}, {k} x {k} rays per pixel: {r['vehicles']} vehicles ({r['failed']} tracker failures), "
                   f"render {r['render_s_per_clip']:.2f} s / clip, tracking {r['track_s_per_clip']:.2f} s / clip",
                   flush=True)
     print(f"\n{args.split} split, first {args.clips} clips; per bin near / medium / far\n")
-    print("| width | vehicles | last tracked box (px, median) | corr(size-change v_z, true v_z) "
+    print("| width | rays per pixel | vehicles | last tracked box (px, median) | corr(size-change v_z, true v_z) "
           "| box bottom motion over the clip (px, median) |")
-    print("|---:|---:|---|---|---|")
-    for w, r in rows:
+    print("|---:|---:|---:|---|---|---|")
+    for w, k, r in rows:
         def row(key, fmt):
             return " / ".join(format(r.get(f"{key}_{b}", float("nan")), fmt) for b in BIN_NAMES)
-        print(f"| {w} | {r['vehicles']} | {row('box_px', '.1f')} | {row('scale_corr', '.2f')} | "
+        print(f"| {w} | {k} x {k} | {r['vehicles']} | {row('box_px', '.1f')} | {row('scale_corr', '.2f')} | "
               f"{row('motion_px', '.2f')} |")
 
 

@@ -483,6 +483,30 @@ def test_run_mlp_monitors_val_only(one_thread):
     assert metrics["smoothing_sigma_test"] == 0.0
 
 
+def test_mlp_keeps_the_epoch_with_the_lowest_val_loss(one_thread):
+    """select_on="val": the returned weights are those of the epoch whose val loss is lowest (the curve marks
+    it), checked by predicting the val set again; an unknown eval set is refused."""
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(64, 6)).astype(np.float32)
+    y = np.stack([x[:, 0], -x[:, 1]], axis=1)
+    xv = rng.normal(size=(32, 6)).astype(np.float32)
+    yv = rng.normal(size=(32, 2)) * 3.0          # val targets unrelated to the inputs: val loss is not monotone
+    kw = dict(hidden=8, layers=1, dropout=0.0, lr=3e-2, lr_decay=1.0, epochs=12, batch_size=16, seed=0,
+              eval_sets={"val": (xv, yv)})
+    model, curve = mlp.train_mlp(x, y, select_on="val", **kw)
+    losses = [r["val_loss"] for r in curve]
+    best = int(np.argmin(losses))
+    assert best != len(curve) - 1                # the case where selecting differs from the last epoch
+    assert [r["best"] for r in curve] == [float(i == best) for i in range(len(curve))]
+    kept = float(((mlp.predict(model, xv) - yv) ** 2).sum(axis=1).mean())
+    assert kept == pytest.approx(losses[best], rel=1e-5)
+    last, curve_last = mlp.train_mlp(x, y, **kw)
+    assert "best" not in curve_last[0]
+    assert float(((mlp.predict(last, xv) - yv) ** 2).sum(axis=1).mean()) == pytest.approx(losses[-1], rel=1e-5)
+    with pytest.raises(ValueError, match="not an eval set"):
+        mlp.train_mlp(x, y, select_on="test", **kw)
+
+
 def test_track_statistics_by_hand():
     from redsup.velocity.summary import fig6_table, track_statistics
 

@@ -113,7 +113,8 @@ def run_mlp(configuration: dict, mlp_cfg: dict, smoothing: dict, samples: int, t
             on_epoch=None, device: str = "cpu") -> tuple[dict, dict, object, list[dict]]:
     """(metrics, predictions, model, curve) of one MLP configuration: train, then evaluate every split.
     Features use each split's own calibration (synthetic tracks: the training clips' calibration). The
-    training curve monitors the `val` split only (when given); no split selects anything here."""
+    training curve monitors the `val` split only (when given); with `select_epoch_on_val` its loss picks the
+    epoch whose weights are kept (`kept_epoch`); the test split never selects anything."""
     from redsup.velocity import mlp
 
     sigma_train, sigma_test = smoothing_of(configuration, smoothing)
@@ -127,12 +128,14 @@ def run_mlp(configuration: dict, mlp_cfg: dict, smoothing: dict, samples: int, t
     model, curve = mlp.train_mlp(features, targets, hidden=mlp_cfg["hidden"], layers=mlp_cfg["layers"],
                                  dropout=mlp_cfg["dropout"], lr=mlp_cfg["lr"], lr_decay=mlp_cfg["lr_decay"],
                                  epochs=epochs_of(configuration, mlp_cfg), batch_size=mlp_cfg["batch_size"], seed=seed,
-                                 eval_sets=monitor, on_epoch=on_epoch, device=device)
+                                 eval_sets=monitor, on_epoch=on_epoch, device=device,
+                                 select_on="val" if mlp_cfg.get("select_epoch_on_val") and monitor else None)
     metrics = dict(counts)
     metrics["train_seconds"] = time.perf_counter() - wall
     metrics["train_cpu_seconds"] = time.process_time() - cpu
     metrics["train_loss_final"] = curve[-1]["train_loss"]
     metrics["train_epochs"] = len(curve)
+    metrics["kept_epoch"] = next((i + 1 for i, r in enumerate(curve) if r.get("best")), len(curve))
     metrics["smoothing_sigma_train"], metrics["smoothing_sigma_test"] = sigma_train, sigma_test
     predictions = {}
     for split, tracks in splits.items():

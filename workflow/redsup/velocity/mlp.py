@@ -91,10 +91,11 @@ def train_mlp(features: np.ndarray, targets: np.ndarray, *, hidden: int, layers:
               lr_decay: float, epochs: int, batch_size: int, seed: int,
               eval_sets: dict[str, tuple[np.ndarray, np.ndarray]] | None = None,
               on_epoch: Callable[[int, dict], None] | None = None,
-              device: str = "cpu") -> tuple[VelocityMLP, list[dict]]:
+              device: str = "cpu", select_on: str | None = None) -> tuple[VelocityMLP, list[dict]]:
     """Train from scratch; returns the model (eval mode) and one dict per epoch: train_loss (mean
     ||V - Psi(b)||^2 over the epoch's batches, dropout on), lr, and `<name>_loss` for every eval set (dropout
-    off; monitoring only, never used to select anything)."""
+    off). ``select_on``: the name of an eval set whose loss picks the epoch whose weights are returned (the
+    lowest; ``best`` marks it in the curve); None: the last epoch's."""
     if len(features) == 0:
         raise ValueError("no training tracks")
     torch.manual_seed(seed)
@@ -108,7 +109,10 @@ def train_mlp(features: np.ndarray, targets: np.ndarray, *, hidden: int, layers:
     evals = {k: (torch.as_tensor(a, dtype=torch.float32, device=device),
                  torch.as_tensor(b, dtype=torch.float32, device=device))
              for k, (a, b) in (eval_sets or {}).items() if len(a)}
+    if select_on is not None and select_on not in evals:
+        raise ValueError(f"select_on={select_on!r} is not an eval set (have {sorted(evals)})")
     curve = []
+    best: tuple[float, int, dict] | None = None
     n = len(x)
     for epoch in tqdm(range(epochs), desc="train velocity MLP", unit="epoch", mininterval=5):
         opt.lr = lr * lr_decay ** epoch                        # exponential decay per epoch
@@ -129,8 +133,14 @@ def train_mlp(features: np.ndarray, targets: np.ndarray, *, hidden: int, layers:
                 for name, (ex, ey) in evals.items():
                     row[f"{name}_loss"] = float(velocity_loss(model(ex), ey).mean())
         curve.append(row)
+        if select_on is not None and (best is None or row[f"{select_on}_loss"] < best[0]):
+            best = (row[f"{select_on}_loss"], epoch, {k: v.detach().clone() for k, v in model.state_dict().items()})
         if on_epoch is not None:
             on_epoch(epoch, row)
+    if best is not None:
+        model.load_state_dict(best[2])
+        for epoch, row in enumerate(curve):
+            row["best"] = float(epoch == best[1])
     model.eval()
     return model, curve
 
