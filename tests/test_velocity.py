@@ -534,3 +534,18 @@ def test_relative_box_features_by_hand():
     np.testing.assert_allclose(f[0, -4:], 0.0, atol=1e-7)     # the last frame itself
     with pytest.raises(ValueError, match="mode"):
         mlp.box_features(boxes, CAL, 0.0, "polar")
+
+
+def test_table_caption_states_the_render_and_the_epoch_kept():
+    from redsup import config as rconfig
+    from redsup.velocity.report import table_note
+
+    cfg = rconfig.load(Path(__file__).resolve().parents[1] / "config.yaml", {"profile": "default"})
+    tcfg = cfg["velocity"]["tables"]["mccraith_ch3_table2"]
+    note = table_note(cfg, tcfg)
+    assert "embedded clips rendered at 320 x 180 px, 2 x 2 rays per pixel" in note
+    assert "the epoch with the lowest val loss kept" in note
+    cfg["velocity_clips"]["supersample"] = 1
+    cfg["velocity"]["mlp"]["select_epoch_on_val"] = False
+    note = table_note(cfg, tcfg)
+    assert "1 x 1 ray per pixel" in note and "lowest val loss" not in note

@@ -145,6 +145,11 @@ def table_note(config: dict, table_cfg: dict, results: dict | None = None) -> st
     a geometric row, the baseline's per-bin diagnosis (redsup.velocity.diagnosis) from its run."""
     v = config["velocity"]
     parts = [f"Profile {config['profile']}"]
+    clips = config.get("velocity_clips", {})
+    if "rows" in table_cfg and "width" in clips and not clips.get("source"):
+        k = int(clips.get("supersample", 1))
+        parts.append(f"embedded clips rendered at {clips['width']} x {clips['height']} px, {k} x {k} "
+                     f"ray{'s' if k > 1 else ''} per pixel (TuSimple: 1280 x 720)")
     if "rows" in table_cfg:
         parts.append("E_v in m^2/s^2 (TuSimple protocol, mean of the near / medium / far bins by ground-truth "
                      "distance), every annotated test vehicle scored")
@@ -154,7 +159,9 @@ def table_note(config: dict, table_cfg: dict, results: dict | None = None) -> st
                      "of the raw tracker boxes")
         parts.append(f"MLPs: {v['mlp']['layers']} x {v['mlp']['hidden']} CReLU, dropout {v['mlp']['dropout']}, "
                      f"{v['mlp']['epochs']} epochs on tracker boxes, {v['mlp']['epochs_synthetic']} on generated "
-                     f"tracks, batch {v['mlp']['batch_size']}; Gaussian smoothing sigma (frames) train / test: "
+                     f"tracks, batch {v['mlp']['batch_size']}"
+                     + (", the epoch with the lowest val loss kept" if v["mlp"].get("select_epoch_on_val") else "")
+                     + "; Gaussian smoothing sigma (frames) train / test: "
                      f"MLP-tracker {_sigmas(v, 'tracker')}, MLP-synthetic {_sigmas(v, 'synthetic')}; "
                      f"input features {v['mlp']['features']}; synthetic tracks: {v['synthetic']['samples']} x samples_factor; "
                      f"{v.get('seeds', 1)} training seeds per MLP (mean ± std over seeds); rows without learning: "
