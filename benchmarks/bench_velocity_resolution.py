@@ -67,9 +67,9 @@ def main(argv=None) -> None:
             for k in args.supersample:
                 r = measure(cfg, w, args.split, args.clips, Path(tmp), k)
                 rows.append((w, k, r))
-                print(f"{w} x {w * 9 // 16}, {k} x {k} rays per pixel: {r['vehicles']} vehicles ({r['failed']} tracker failures), "
-                  f"render {r['render_s_per_clip']:.2f} s / clip, tracking {r['track_s_per_clip']:.2f} s / clip",
-                  flush=True)
+                print(f"{w} x {w * 9 // 16}, {k} x {k} rays per pixel: {r['vehicles']} vehicles "
+                      f"({r['failed']} tracker failures), render {r['render_s_per_clip']:.2f} s / clip, "
+                      f"tracking {r['track_s_per_clip']:.2f} s / clip", flush=True)
     print(f"\n{args.split} split, first {args.clips} clips; per bin near / medium / far\n")
     print("| width | rays per pixel | vehicles | last tracked box (px, median) | corr(size-change v_z, true v_z) "
           "| box bottom motion over the clip (px, median) |")

@@ -127,7 +127,7 @@ def system_settings(depth_cfg: Mapping, system: str) -> dict:
 
 SYSTEM_MODEL_KEYS = ("base_channels", "n_bins", "range_init", "range_momentum", "static_prob", "zero_prob",
                      "consistency_weight", "freeze_at", "alpha", "beta", "feature_weight", "input_scale")
-SYSTEM_TRAIN_KEYS = ("steps", "batch_size", "lr", "decay_at", "gamma", "epochs")
+SYSTEM_TRAIN_KEYS = ("steps", "batch_size", "lr", "decay_at", "gamma")   # epochs: train_epochs
 
 
 def train_epochs(depth_cfg: Mapping, mode: str) -> int:
@@ -152,7 +152,7 @@ def train_settings(depth_cfg: Mapping, dataset: str, mode: str) -> tuple[dict, d
     if "input_scale" in mode_cfg:
         model["input_scale"] = float(mode_cfg["input_scale"])
     train = {**depth_cfg["train"], "epochs": train_epochs(depth_cfg, mode),
-             **{k: sset[k] for k in SYSTEM_TRAIN_KEYS if k in sset and k != "epochs"}}
+             **{k: sset[k] for k in SYSTEM_TRAIN_KEYS if k in sset}}
     steps = next((m["steps"] for m in depth_cfg["models"]
                   if m["dataset"] == dataset and m["mode"] == mode and m.get("steps")), mode_cfg.get("steps"))
     if steps:

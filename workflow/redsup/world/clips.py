@@ -78,6 +78,7 @@ def write_clips(world_cfg: dict, clips_cfg: dict, split: str, seed: int, out_dir
     spec = clips_cfg["splits"][split]
     dom = world_cfg["domains"][clips_cfg["domain"]]
     cam = clip_camera(world_cfg, clips_cfg)
+    supersample = int(clips_cfg.get("supersample", 1))
     out_dir = Path(out_dir)
     tmp = temp_dir_for(out_dir)
     counts = {"near": 0, "medium": 0, "far": 0}
@@ -97,9 +98,9 @@ def write_clips(world_cfg: dict, clips_cfg: dict, split: str, seed: int, out_dir
                 T_wc = state.T_world_vehicle @ cam.T_vehicle_sensor
                 out = render_camera(cam, T_wc, state.prims, view, dom["appearance"], world_cfg["pixel_noise"],
                                     clips_cfg["render_distance"], world_cfg["fog_distance"], rng,
-                                    supersample=int(clips_cfg.get("supersample", 1)))
+                                    supersample=supersample)
                 write_png(folder / f"{i + 1:03d}.png", out["rgb"])
-            ann = annotate(mw, state, cam, out, clips_cfg, int(clips_cfg.get("supersample", 1)))
+            ann = annotate(mw, state, cam, out, clips_cfg, supersample)
             (folder.parent / "annotation.json").write_text(json.dumps(ann, indent=1))
             for a in ann:
                 z = a["position"][0]
