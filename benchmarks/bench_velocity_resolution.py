@@ -7,10 +7,14 @@ area so the same vehicles are annotated) with each ``--supersample`` (rays per p
 them with the project's MedianFlow step, and prints per distance bin (``redsup.velocity.diagnosis``): the median
 height of the last tracked box (px), the correlation of the v_z its size change implies with the true v_z (the
 signal a box-based MLP can learn from), the median true motion of the box bottom over the clip (px) and the
-render / tracking seconds. No model is trained.
+render / tracking seconds. No model is trained. With ``--truth`` also, from the world's true distance of every
+vehicle in every frame (``redsup.world.clips.true_distances``, diagnostics only): the spread of the true size
+change the tracker has to resolve, the tracker's error on it, and the E_v that estimating the clip's mean
+velocity costs when the relative velocity changes within the clip (``truth_diagnosis``).
 
     python benchmarks/bench_velocity_resolution.py                          # 20 test clips, 320 / 640 / 1280
     python benchmarks/bench_velocity_resolution.py --clips 40 --widths 320 --supersample 1 2 --split val
+    python benchmarks/bench_velocity_resolution.py --clips 40 --widths 320 640 --split val --truth
 """
 from __future__ import annotations
 
@@ -21,18 +25,21 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
+
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "workflow"))
 
 from redsup import config as rconfig  # noqa: E402
 from redsup.prep.medianflow import write_medianflow  # noqa: E402
 from redsup.velocity.data import load_split  # noqa: E402
-from redsup.velocity.diagnosis import geometric_diagnosis  # noqa: E402
+from redsup.velocity.diagnosis import geometric_diagnosis, truth_diagnosis  # noqa: E402
 from redsup.velocity.metrics import BIN_NAMES  # noqa: E402
-from redsup.world.clips import write_clips  # noqa: E402
+from redsup.world.clips import true_distances, write_clips  # noqa: E402
 
 
-def measure(cfg: dict, width: int, split: str, clips: int, workdir: Path, supersample: int = 1) -> dict:
+def measure(cfg: dict, width: int, split: str, clips: int, workdir: Path, supersample: int = 1,
+            truth: bool = False) -> dict:
     ccfg = copy.deepcopy(cfg["velocity_clips"])
     ccfg["supersample"] = supersample
     base_w = ccfg["width"]
@@ -47,8 +54,18 @@ def measure(cfg: dict, width: int, split: str, clips: int, workdir: Path, supers
     t2 = time.perf_counter()
     tracks = load_split(out.with_suffix(".npz"), out, cfg["velocity"]["min_box_px"])
     d = geometric_diagnosis(tracks, float(ccfg["fps"]))
+    if truth:   # the world's per-frame distances: what limits the tracks (redsup.velocity.diagnosis.truth_diagnosis)
+        distance = np.full(tracks.boxes.shape[:2], np.nan)
+        for c in np.unique(tracks.clip):
+            sel = np.nonzero(tracks.clip == c)[0]
+            distance[sel] = true_distances(cfg["world"], ccfg, split, cfg["seed"], int(c), tracks.track_id[sel])
+        d.update(truth_diagnosis(tracks, distance, float(ccfg["fps"])))
     return {**d, "render_s_per_clip": (t1 - t0) / clips, "track_s_per_clip": (t2 - t1) / clips,
             "vehicles": len(tracks), "failed": int(tracks.tracker_failed.sum())}
+
+
+def per_bin(r: dict, key: str, fmt: str) -> str:
+    return " / ".join(format(r.get(f"{key}_{b}", float("nan")), fmt) for b in BIN_NAMES)
 
 
 def main(argv=None) -> None:
@@ -59,13 +76,16 @@ def main(argv=None) -> None:
     p.add_argument("--widths", type=int, nargs="+", default=[320, 640, 1280])
     p.add_argument("--supersample", type=int, nargs="+", default=[1],
                    help="rays per pixel along each axis (velocity_clips.supersample), every width with each")
+    p.add_argument("--truth", action="store_true",
+                   help="also the world's per-frame distances: size change to resolve, tracker error on it, and the "
+                        "E_v floor of the clip's mean velocity (relative velocity changing within the clip)")
     args = p.parse_args(argv)
     cfg = rconfig.load(args.config)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for w in args.widths:
             for k in args.supersample:
-                r = measure(cfg, w, args.split, args.clips, Path(tmp), k)
+                r = measure(cfg, w, args.split, args.clips, Path(tmp), k, args.truth)
                 rows.append((w, k, r))
                 print(f"{w} x {w * 9 // 16}, {k} x {k} rays per pixel: {r['vehicles']} vehicles "
                       f"({r['failed']} tracker failures), render {r['render_s_per_clip']:.2f} s / clip, "
@@ -75,10 +95,15 @@ def main(argv=None) -> None:
           "| box bottom motion over the clip (px, median) |")
     print("|---:|---:|---:|---|---|---|")
     for w, k, r in rows:
-        def row(key, fmt):
-            return " / ".join(format(r.get(f"{key}_{b}", float("nan")), fmt) for b in BIN_NAMES)
-        print(f"| {w} | {k} x {k} | {r['vehicles']} | {row('box_px', '.1f')} | {row('scale_corr', '.2f')} | "
-              f"{row('motion_px', '.2f')} |")
+        print(f"| {w} | {k} x {k} | {r['vehicles']} | {per_bin(r, 'box_px', '.1f')} | "
+              f"{per_bin(r, 'scale_corr', '.2f')} | {per_bin(r, 'motion_px', '.2f')} |")
+    if args.truth:
+        print("\n| width | rays per pixel | std of the true size ratio s_(T-1) / s_1 | std of the tracker's error on it "
+              "| E_v floor of the clip-mean v_z (m^2/s^2) |")
+        print("|---:|---:|---|---|---|")
+        for w, k, r in rows:
+            print(f"| {w} | {k} x {k} | {per_bin(r, 'ratio_signal', '.3f')} | {per_bin(r, 'ratio_noise', '.3f')} | "
+                  f"{per_bin(r, 'accel_floor', '.2f')} |")
 
 
 if __name__ == "__main__":

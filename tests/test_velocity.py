@@ -461,6 +461,30 @@ def test_scale_signal_by_hand():
     assert jittered["scale_corr_far"] < exact["scale_corr_far"] - 0.05
 
 
+def test_truth_diagnosis_by_hand():
+    """Per bin, by hand (T = 4 frames at 1 fps, t = 2 s): the v_z term paid by the clip's mean velocity, the
+    spread of the true size ratio Z_1 / Z_3, and the tracker's error on it (failed tracks left out)."""
+    from redsup.velocity.diagnosis import truth_diagnosis
+
+    boxes = np.array([[[0, 0, 10, 10], [0, 0, 9, 9], [0, 0, 8, 8], [0, 0, 7.9, 7.9]],      # tracked ratio 0.8
+                      [[0, 0, 5, 5], [0, 0, 5, 5], [0, 0, 5.5, 5.5], [0, 0, 5, 5]],        # 1.1
+                      [[0, 0, 2, 2], [0, 0, 2, 2], [0, 0, 3, 3], [0, 0, 2, 2]]], float)    # failed
+    distance = np.array([[16.0, 17.0, 18.0, 20.0], [20.0] * 4, [50.0] * 4])
+    tracks = TrackSet(boxes=boxes, velocity=np.array([[0.0, 2.0], [0.0, 0.0], [0.0, 1.0]]),
+                      position=np.array([[0.0, 20.0], [0.0, 20.0], [0.0, 50.0]]), bins=np.array([0, 0, 2]),
+                      clip=np.array([1, 1, 2]), track_id=np.array([1, 2, 1]),
+                      tracker_failed=np.array([False, False, True]), degenerate=np.zeros(3, bool))
+    d = truth_diagnosis(tracks, distance, 1.0)
+    # v_avg = (18 - 16) / 2 = 1 against the annotated 2, and 0 against 0: mean of 1 and 0
+    assert d["accel_floor_near"] == pytest.approx(0.5)
+    # true ratios 16 / 18 and 1: std = (1 - 8 / 9) / 2
+    assert d["ratio_signal_near"] == pytest.approx((1 - 8 / 9) / 2)
+    # tracked minus true: 0.8 - 8 / 9 and 1.1 - 1
+    assert d["ratio_noise_near"] == pytest.approx(np.std([0.8 - 8 / 9, 0.1]))
+    assert d["accel_floor_far"] == pytest.approx(1.0) and d["ratio_signal_far"] == 0.0
+    assert np.isnan(d["ratio_noise_far"]) and "accel_floor_medium" not in d
+
+
 def test_smoothing_protocol_per_training_data():
     from redsup.velocity.experiment import smoothing_of
 
@@ -543,9 +567,9 @@ def test_table_caption_states_the_render_and_the_epoch_kept():
     cfg = rconfig.load(Path(__file__).resolve().parents[1] / "config.yaml", {"profile": "default"})
     tcfg = cfg["velocity"]["tables"]["mccraith_ch3_table2"]
     note = table_note(cfg, tcfg)
-    assert "embedded clips rendered at 320 x 180 px, 2 x 2 rays per pixel" in note
+    assert "embedded clips rendered at 320 x 180 px, 1 x 1 ray per pixel" in note
     assert "the epoch with the lowest val loss kept" in note
-    cfg["velocity_clips"]["supersample"] = 1
+    cfg["velocity_clips"]["supersample"] = 2
     cfg["velocity"]["mlp"]["select_epoch_on_val"] = False
     note = table_note(cfg, tcfg)
-    assert "1 x 1 ray per pixel" in note and "lowest val loss" not in note
+    assert "2 x 2 rays per pixel" in note and "lowest val loss" not in note

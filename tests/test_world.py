@@ -455,3 +455,23 @@ def test_abnormal_velocity_scale(cfg):
             rel.extend(mw.cars["vel"][mw.target, 0] - mw.ego.v[-1])
         spread[scale] = np.sqrt(np.mean(np.square(rel)))
     assert spread[3.0] == pytest.approx(3.0 * spread[1.0], rel=0.25)   # the traffic model's dv, scaled
+
+
+def test_true_distances_end_at_the_annotated_position(cfg, tmp_path):
+    """The diagnostic per-frame distances rebuild the clip's motorway from its seed: in the last frame they equal
+    the annotated z of every vehicle (annotations keep 4 decimals), and they span the clip's frames."""
+    from redsup.world.clips import true_distances
+
+    world = copy.deepcopy(cfg["world"])
+    clips = copy.deepcopy(cfg["velocity_clips"])
+    clips.update(width=160, height=90, frames=3, supersample=1)
+    clips["splits"]["val"] = {"clips": 2, "velocity_scale": 1.0}
+    write_clips(world, clips, "val", 5, tmp_path / "c")
+    n = 0
+    for c in (1, 2):
+        ann = json.loads((tmp_path / "c" / "clips" / str(c) / "annotation.json").read_text())
+        z = true_distances(world, clips, "val", 5, c, [a["track_id"] for a in ann])
+        assert z.shape == (len(ann), 3)
+        assert np.allclose(z[:, -1], [a["position"][0] for a in ann], atol=1e-3)
+        n += len(ann)
+    assert n >= 2

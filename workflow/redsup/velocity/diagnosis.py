@@ -15,6 +15,9 @@ For every split, on the MedianFlow boxes of every annotated vehicle:
 - the tracker's scale signal (`scale_signal`): the median height of the last tracked box (px) and the correlation
   of the velocity its size change implies with the true v_z, over the vehicles tracked without failure: the
   information on v_z a box-based MLP can draw from the tracks, and how it fades with the box's pixel size.
+
+With the true distance in every frame (rendered clips only), `truth_diagnosis` splits that into the size change
+to resolve, the tracker's error on it, and the change of the relative velocity within the clip.
 """
 from __future__ import annotations
 
@@ -58,6 +61,35 @@ def scale_signal(tracks: TrackSet, fps: float) -> dict[str, float]:
         x, y = v[ok], tracks.velocity[ok, 1]
         out[f"scale_corr_{b}"] = (float(np.corrcoef(x, y)[0, 1]) if ok.sum() >= 3 and x.std() > 0 and y.std() > 0
                                   else float("nan"))
+    return out
+
+
+def truth_diagnosis(tracks: TrackSet, distance: np.ndarray, fps: float) -> dict[str, float]:
+    """What limits a box-based velocity on rendered clips, given every vehicle's true distance in every frame
+    (``distance`` (N, T), m; only a world can give it: `redsup.world.clips.true_distances`). Flat dict per bin:
+
+    - ``accel_floor_<bin>``: mean of (v_avg - v_z)^2, v_avg = (Z_(T-1) - Z_1) / t the true mean v_z over the
+      tracked frames (t as `scale_velocity`), v_z the annotated last-frame value: what any estimate of the clip's
+      mean velocity pays in E_v's v_z term when the relative velocity changes within the clip (ego acceleration);
+    - ``ratio_signal_<bin>``: std over the bin's vehicles of the true size ratio s_(T-1) / s_1 = Z_1 / Z_(T-1),
+      the size change a tracker must resolve;
+    - ``ratio_noise_<bin>``: std of the tracked ratio minus the true one, over vehicles tracked without failure.
+    """
+    size = np.sqrt(np.clip(tracks.boxes[:, :, 2], 0, None) * np.clip(tracks.boxes[:, :, 3], 0, None))
+    t = (tracks.boxes.shape[1] - 2) / fps
+    v_avg = (distance[:, -2] - distance[:, 0]) / t
+    true_ratio = distance[:, 0] / distance[:, -2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tracked_ratio = size[:, -2] / size[:, 0]
+    out: dict[str, float] = {}
+    for k, b in enumerate(BIN_NAMES):
+        sel = tracks.bins == k
+        if not sel.any():
+            continue
+        out[f"accel_floor_{b}"] = float(np.mean((v_avg[sel] - tracks.velocity[sel, 1]) ** 2))
+        out[f"ratio_signal_{b}"] = float(np.std(true_ratio[sel]))
+        ok = sel & ~tracks.tracker_failed & np.isfinite(tracked_ratio)
+        out[f"ratio_noise_{b}"] = float(np.std(tracked_ratio[ok] - true_ratio[ok])) if ok.any() else float("nan")
     return out
 
 

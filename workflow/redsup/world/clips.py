@@ -28,6 +28,41 @@ def clip_camera(world_cfg: dict, ccfg: dict) -> Camera:
     return Camera("cam_front", K, ccfg["width"], ccfg["height"], T)
 
 
+def near_face(mw, state, cam: Camera, k: int) -> tuple[float, float]:
+    """(x, z) in camera ground-plane axes (x right, z forward, m) of car k's point nearest the camera along its
+    heading, at ground level (the face centre): the annotated position."""
+    T_vw = np.linalg.inv(state.T_world_vehicle)
+    cam_v = cam.T_vehicle_sensor[:3, 3]
+    fwd = state.car_rot[k, :, 0]
+    half_l = mw.cars["size"][k, 0] / 2
+    to_cam = state.T_world_vehicle[:3, 3] - state.car_pos[k]
+    near = state.car_pos[k] + fwd * half_l * np.sign(np.dot(fwd, to_cam))
+    p_v = rotate(near, T_vw[:3, :3]) + T_vw[:3, 3]
+    return float(-(p_v[1] - cam_v[1])), float(p_v[0] - cam_v[0])
+
+
+def clip_motorway(world_cfg: dict, clips_cfg: dict, split: str, seed: int, c: int):
+    """(motorway, rng) of clip c (0-based) of ``split``; the rng continues into the clip's rendering."""
+    rng = derive_rng(seed, "clip", SPLIT_CODES.get(split, split), c)   # val: a split of the clips only
+    dom = world_cfg["domains"][clips_cfg["domain"]]
+    return build_motorway(world_cfg, clips_cfg, dom, rng, clips_cfg["splits"][split]["velocity_scale"]), rng
+
+
+def true_distances(world_cfg: dict, clips_cfg: dict, split: str, seed: int, clip: int, track_ids) -> np.ndarray:
+    """(len(track_ids), frames) true distance z (m, `near_face`) of the given vehicles of clip ``clip`` (1-based,
+    as the clip folders) in every frame: the motorway is rebuilt from the clip's seed, nothing is rendered. For
+    diagnostics only (benchmarks/bench_velocity_resolution.py --truth); no method sees it."""
+    mw, _ = clip_motorway(world_cfg, clips_cfg, split, seed, clip - 1)
+    cam = clip_camera(world_cfg, clips_cfg)
+    index = {int(t): k for k, t in enumerate(mw.cars["track_id"])}
+    out = np.full((len(track_ids), clips_cfg["frames"]), np.nan)
+    for i in range(clips_cfg["frames"]):
+        state = motorway_state(mw, i)
+        for j, tid in enumerate(track_ids):
+            out[j, i] = near_face(mw, state, cam, index[int(tid)])[1]
+    return out
+
+
 def annotate(mw, state, cam: Camera, rendered: dict, ccfg: dict, supersample: int = 1) -> list[dict]:
     """Annotations of the last frame: every car sufficiently visible and within the distance range. With
     ``supersample`` k the rendered buffers are the k-times finer grid (``shade.render_camera``): visible pixels
@@ -40,8 +75,6 @@ def annotate(mw, state, cam: Camera, rendered: dict, ccfg: dict, supersample: in
     count, box = instance_boxes(rendered["instance"], n)
     count = count / fine
     box = (box + 0.5) / supersample - 0.5
-    T_vw = np.linalg.inv(state.T_world_vehicle)
-    cam_v = cam.T_vehicle_sensor[:3, 3]
     ego_vel = mw.ego.velocity[-1]
     R_wv = state.T_world_vehicle[:3, :3]
     out = []
@@ -50,13 +83,7 @@ def annotate(mw, state, cam: Camera, rendered: dict, ccfg: dict, supersample: in
         vis = float(count[tid])
         if vis < ccfg["min_visible_px"] or vis < ccfg["min_visible_fraction"] * max(float(own[k]), 1.0):
             continue
-        # the point of the car nearest the camera along its heading, at ground level (face centre)
-        fwd = state.car_rot[k, :, 0]
-        half_l = mw.cars["size"][k, 0] / 2
-        to_cam = state.T_world_vehicle[:3, 3] - state.car_pos[k]
-        near = state.car_pos[k] + fwd * half_l * np.sign(np.dot(fwd, to_cam))
-        p_v = rotate(near, T_vw[:3, :3]) + T_vw[:3, 3]
-        x, z = -(p_v[1] - cam_v[1]), p_v[0] - cam_v[0]
+        x, z = near_face(mw, state, cam, k)
         if not ccfg["min_distance"] <= z <= ccfg["max_distance"]:
             continue
         v_rel = rotate(state.car_vel[k] - ego_vel, R_wv.T)
@@ -88,8 +115,7 @@ def write_clips(world_cfg: dict, clips_cfg: dict, split: str, seed: int, out_dir
         (tmp / "calibration.txt").write_text(f"{K[0, 0]:.6f} {K[1, 1]:.6f} {K[0, 2]:.6f} {K[1, 2]:.6f}\n"
                                              f"{clips_cfg['camera_height']:.4f}\n")
         for c in range(spec["clips"]):
-            rng = derive_rng(seed, "clip", SPLIT_CODES.get(split, split), c)   # val: a split of the clips only
-            mw = build_motorway(world_cfg, clips_cfg, dom, rng, spec["velocity_scale"])
+            mw, rng = clip_motorway(world_cfg, clips_cfg, split, seed, c)
             view = SceneView(mw.road, mw.style, mw.cars, mw.buildings)
             folder = tmp / "clips" / str(c + 1) / "imgs"
             folder.mkdir(parents=True)
