@@ -31,17 +31,25 @@ from redsup.velocity.smoothing import gaussian_smooth
 VARIANTS = {"diff": (2, 0.0), "lsq10": (10, 0.0), "smooth5_diff": (2, 5.0)}
 
 
-def scale_velocity(boxes: np.ndarray, distance: np.ndarray, fps: float) -> np.ndarray:
-    """(N,) v_z implied by the size change of tracks (N, T, 4) between the first frame and the last tracked one
-    (frame T - 1; frame T is the annotation the tracker starts from), at the last frame's distance Z: the
-    apparent size s (sqrt of w h) falls as 1 / Z, so Z_1 = Z s_(T-1) / s_1 and v_z = Z (1 - s_(T-1) / s_1) / t
-    with t = (T - 2) / fps. NaN where a size is not positive."""
+def size_ratio(boxes: np.ndarray) -> np.ndarray:
+    """(N,) s_(T-1) / s_1 of tracks (N, T, 4): the apparent size s (sqrt of w h) in the last tracked frame (T - 1;
+    frame T is the annotation the tracker starts from) over the first. NaN where a size is not positive."""
     size = np.sqrt(np.clip(boxes[:, :, 2], 0, None) * np.clip(boxes[:, :, 3], 0, None))
     first, last = size[:, 0], size[:, -2]
-    t = (boxes.shape[1] - 2) / fps
     with np.errstate(divide="ignore", invalid="ignore"):
-        v = distance * (1.0 - last / first) / t
-    return np.where((first > 0) & (last > 0), v, np.nan)
+        return np.where((first > 0) & (last > 0), last / first, np.nan)
+
+
+def tracked_span(boxes: np.ndarray, fps: float) -> float:
+    """Seconds between the first and the last tracked frame of `size_ratio`: (T - 2) / fps."""
+    return (boxes.shape[1] - 2) / fps
+
+
+def scale_velocity(boxes: np.ndarray, distance: np.ndarray, fps: float) -> np.ndarray:
+    """(N,) v_z implied by the size change of tracks (N, T, 4) (`size_ratio`), at the last frame's distance Z:
+    the apparent size falls as 1 / Z, so Z_1 = Z s_(T-1) / s_1 and v_z = Z (1 - s_(T-1) / s_1) / t with t =
+    `tracked_span`. NaN where a size is not positive."""
+    return distance * (1.0 - size_ratio(boxes)) / tracked_span(boxes, fps)
 
 
 def scale_signal(tracks: TrackSet, fps: float) -> dict[str, float]:
@@ -69,18 +77,15 @@ def truth_diagnosis(tracks: TrackSet, distance: np.ndarray, fps: float) -> dict[
     (``distance`` (N, T), m; only a world can give it: `redsup.world.clips.true_distances`). Flat dict per bin:
 
     - ``accel_floor_<bin>``: mean of (v_avg - v_z)^2, v_avg = (Z_(T-1) - Z_1) / t the true mean v_z over the
-      tracked frames (t as `scale_velocity`), v_z the annotated last-frame value: what any estimate of the clip's
+      tracked frames (t = `tracked_span`), v_z the annotated last-frame value: what any estimate of the clip's
       mean velocity pays in E_v's v_z term when the relative velocity changes within the clip (ego acceleration);
     - ``ratio_signal_<bin>``: std over the bin's vehicles of the true size ratio s_(T-1) / s_1 = Z_1 / Z_(T-1),
       the size change a tracker must resolve;
     - ``ratio_noise_<bin>``: std of the tracked ratio minus the true one, over vehicles tracked without failure.
     """
-    size = np.sqrt(np.clip(tracks.boxes[:, :, 2], 0, None) * np.clip(tracks.boxes[:, :, 3], 0, None))
-    t = (tracks.boxes.shape[1] - 2) / fps
-    v_avg = (distance[:, -2] - distance[:, 0]) / t
+    v_avg = (distance[:, -2] - distance[:, 0]) / tracked_span(tracks.boxes, fps)
     true_ratio = distance[:, 0] / distance[:, -2]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        tracked_ratio = size[:, -2] / size[:, 0]
+    tracked_ratio = size_ratio(tracks.boxes)
     out: dict[str, float] = {}
     for k, b in enumerate(BIN_NAMES):
         sel = tracks.bins == k

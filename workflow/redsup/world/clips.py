@@ -28,17 +28,18 @@ def clip_camera(world_cfg: dict, ccfg: dict) -> Camera:
     return Camera("cam_front", K, ccfg["width"], ccfg["height"], T)
 
 
-def near_face(mw, state, cam: Camera, k: int) -> tuple[float, float]:
-    """(x, z) in camera ground-plane axes (x right, z forward, m) of car k's point nearest the camera along its
-    heading, at ground level (the face centre): the annotated position."""
+def near_faces(mw, state, cam: Camera) -> np.ndarray:
+    """(n_cars, 2) [x, z] in camera ground-plane axes (x right, z forward, m) of every car's point nearest the
+    camera along its heading, at ground level (the face centre): the annotated position."""
     T_vw = np.linalg.inv(state.T_world_vehicle)
     cam_v = cam.T_vehicle_sensor[:3, 3]
-    fwd = state.car_rot[k, :, 0]
-    half_l = mw.cars["size"][k, 0] / 2
-    to_cam = state.T_world_vehicle[:3, 3] - state.car_pos[k]
-    near = state.car_pos[k] + fwd * half_l * np.sign(np.dot(fwd, to_cam))
+    fwd = state.car_rot[:, :, 0]
+    half_l = mw.cars["size"][:, 0] / 2
+    to_cam = state.T_world_vehicle[:3, 3] - state.car_pos
+    sign = np.sign(np.einsum("ni,ni->n", fwd, to_cam))
+    near = state.car_pos + fwd * (half_l * sign)[:, None]
     p_v = rotate(near, T_vw[:3, :3]) + T_vw[:3, 3]
-    return float(-(p_v[1] - cam_v[1])), float(p_v[0] - cam_v[0])
+    return np.stack([-(p_v[:, 1] - cam_v[1]), p_v[:, 0] - cam_v[0]], axis=-1)
 
 
 def clip_motorway(world_cfg: dict, clips_cfg: dict, split: str, seed: int, c: int):
@@ -49,18 +50,15 @@ def clip_motorway(world_cfg: dict, clips_cfg: dict, split: str, seed: int, c: in
 
 
 def true_distances(world_cfg: dict, clips_cfg: dict, split: str, seed: int, clip: int, track_ids) -> np.ndarray:
-    """(len(track_ids), frames) true distance z (m, `near_face`) of the given vehicles of clip ``clip`` (1-based,
+    """(len(track_ids), frames) true distance z (m, `near_faces`) of the given vehicles of clip ``clip`` (1-based,
     as the clip folders) in every frame: the motorway is rebuilt from the clip's seed, nothing is rendered. For
     diagnostics only (benchmarks/bench_velocity_resolution.py --truth); no method sees it."""
     mw, _ = clip_motorway(world_cfg, clips_cfg, split, seed, clip - 1)
     cam = clip_camera(world_cfg, clips_cfg)
     index = {int(t): k for k, t in enumerate(mw.cars["track_id"])}
-    out = np.full((len(track_ids), clips_cfg["frames"]), np.nan)
-    for i in range(clips_cfg["frames"]):
-        state = motorway_state(mw, i)
-        for j, tid in enumerate(track_ids):
-            out[j, i] = near_face(mw, state, cam, index[int(tid)])[1]
-    return out
+    rows = [index[int(t)] for t in track_ids]
+    return np.stack([near_faces(mw, motorway_state(mw, i), cam)[rows, 1] for i in range(clips_cfg["frames"])],
+                    axis=-1).reshape(len(rows), clips_cfg["frames"])
 
 
 def annotate(mw, state, cam: Camera, rendered: dict, ccfg: dict, supersample: int = 1) -> list[dict]:
@@ -77,13 +75,14 @@ def annotate(mw, state, cam: Camera, rendered: dict, ccfg: dict, supersample: in
     box = (box + 0.5) / supersample - 0.5
     ego_vel = mw.ego.velocity[-1]
     R_wv = state.T_world_vehicle[:3, :3]
+    faces = near_faces(mw, state, cam)
     out = []
     for k in range(n):
         tid = int(mw.cars["track_id"][k])
         vis = float(count[tid])
         if vis < ccfg["min_visible_px"] or vis < ccfg["min_visible_fraction"] * max(float(own[k]), 1.0):
             continue
-        x, z = near_face(mw, state, cam, k)
+        x, z = (float(v) for v in faces[k])
         if not ccfg["min_distance"] <= z <= ccfg["max_distance"]:
             continue
         v_rel = rotate(state.car_vel[k] - ego_vel, R_wv.T)
