@@ -118,8 +118,9 @@ def build_motorway(world_cfg: dict, ccfg: dict, dom: dict, rng: np.random.Genera
     road = make_road(rng, x_lo - 50, x_hi + 50, ccfg["grade_max"], ccfg["grade_sigma"],
                      tuple(world_cfg["road"]["grade_segment"]), world_cfg["road"]["camber_sigma"], hw, 0.0)
     ego_lane = int(rng.integers(0, lanes))
-    ego_cfg = dict(world_cfg["ego"], speed=list(ccfg["ego_speed"]), stop_prob=0.0, knot_interval=[1.5, 4.0],
-                   max_accel=1.5, lateral_drift=0.12, drift_wavelength=[200.0, 500.0])
+    ego_cfg = dict(world_cfg["ego"], speed=list(ccfg["ego_speed"]), stop_prob=0.0,
+                   knot_interval=list(ccfg["ego"]["knot_interval"]), max_accel=float(ccfg["ego"]["max_accel"]),
+                   lateral_drift=0.12, drift_wavelength=[200.0, 500.0])
     ego = make_ego(rng, ego_cfg, road, n_frames, fps, lane_centre(ego_lane, lw), stationary=False)
     cam_x = world_cfg["rig"]["camera_x"]
     T_end = (n_frames - 1) / fps
