@@ -475,3 +475,21 @@ def test_true_distances_end_at_the_annotated_position(cfg, tmp_path):
         assert np.allclose(z[:, -1], [a["position"][0] for a in ann], atol=1e-3)
         n += len(ann)
     assert n >= 2
+
+
+def test_clips_render_the_same_files_in_parallel(cfg, tmp_path):
+    """Clips depend only on (seed, split, clip): two worker processes write byte-identical clips to one process,
+    and the same summary counts (the rule's threads are the workers: a cluster renders a split in parallel)."""
+    world = copy.deepcopy(cfg["world"])
+    clips = copy.deepcopy(cfg["velocity_clips"])
+    clips.update(width=96, height=54, frames=3)
+    clips["splits"]["train"] = {"clips": 3, "velocity_scale": 1.0}
+    one = write_clips(world, clips, "train", 5, tmp_path / "one")
+    two = write_clips(world, clips, "train", 5, tmp_path / "two", workers=2)
+    files = sorted(p.relative_to(tmp_path / "one") for p in (tmp_path / "one").rglob("*") if p.is_file())
+    assert len(files) == 1 + 3 * (3 + 1)                    # calibration + per clip 3 frames and the annotation
+    for f in files:
+        assert (tmp_path / "one" / f).read_bytes() == (tmp_path / "two" / f).read_bytes(), f
+    assert sorted(p.relative_to(tmp_path / "two") for p in (tmp_path / "two").rglob("*") if p.is_file()) == files
+    assert {k: one[k] for k in ("annotated", "near", "medium", "far")} == \
+        {k: two[k] for k in ("annotated", "near", "medium", "far")} and two["workers"] == 2

@@ -10,6 +10,6 @@ sm = snakemake  # noqa: F821
 with child_run(sm.log.run, "world", f"clips/{sm.wildcards.split}", rule=sm.rule,
                wildcards=dict(sm.wildcards), config=sm.config) as run:
     summary = write_clips(sm.config["world"], sm.config["velocity_clips"], split=sm.wildcards.split,
-                          seed=sm.config["seed"], out_dir=sm.output[0])
+                          seed=sm.config["seed"], out_dir=sm.output[0], workers=sm.threads)
     run.log_metrics(summary)
     print(summary)

@@ -10,9 +10,12 @@ from __future__ import annotations
 import json
 import shutil
 import time
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from multiprocessing import get_context
 from pathlib import Path
 
 import numpy as np
+from tqdm import tqdm
 
 from .common import SPLIT_CODES, derive_rng, pose, rotate
 from .generate import publish, temp_dir_for, write_png
@@ -93,8 +96,30 @@ def annotate(mw, state, cam: Camera, rendered: dict, ccfg: dict, supersample: in
     return out
 
 
-def write_clips(world_cfg: dict, clips_cfg: dict, split: str, seed: int, out_dir: str | Path) -> dict:
-    """Render the clips of `split` (a key of clips_cfg['splits']) into out_dir; returns summary numbers."""
+def render_clip(world_cfg: dict, clips_cfg: dict, split: str, seed: int, c: int, folder: Path) -> list[dict]:
+    """Render clip c (0-based) of ``split`` into ``folder`` (``imgs/001.png ...`` and ``annotation.json``);
+    returns its annotations. Depends only on (seed, split, c): clips render in any order, in any process."""
+    dom = world_cfg["domains"][clips_cfg["domain"]]
+    cam = clip_camera(world_cfg, clips_cfg)
+    supersample = int(clips_cfg.get("supersample", 1))
+    mw, rng = clip_motorway(world_cfg, clips_cfg, split, seed, c)
+    view = SceneView(mw.road, mw.style, mw.cars, mw.buildings)
+    (folder / "imgs").mkdir(parents=True)
+    for i in range(clips_cfg["frames"]):
+        state = motorway_state(mw, i)
+        T_wc = state.T_world_vehicle @ cam.T_vehicle_sensor
+        out = render_camera(cam, T_wc, state.prims, view, dom["appearance"], world_cfg["pixel_noise"],
+                            clips_cfg["render_distance"], world_cfg["fog_distance"], rng, supersample=supersample)
+        write_png(folder / "imgs" / f"{i + 1:03d}.png", out["rgb"])
+    ann = annotate(mw, state, cam, out, clips_cfg, supersample)
+    (folder / "annotation.json").write_text(json.dumps(ann, indent=1))
+    return ann
+
+
+def write_clips(world_cfg: dict, clips_cfg: dict, split: str, seed: int, out_dir: str | Path,
+                workers: int = 1) -> dict:
+    """Render the clips of `split` (a key of clips_cfg['splits']) into out_dir; returns summary numbers.
+    ``workers`` > 1 renders clips in that many processes; the files are the same as with one."""
     if split not in clips_cfg["splits"]:
         raise ValueError(f"unknown clip split {split!r} (have {sorted(clips_cfg['splits'])})")
     if clips_cfg["domain"] not in world_cfg["domains"]:
@@ -102,31 +127,32 @@ def write_clips(world_cfg: dict, clips_cfg: dict, split: str, seed: int, out_dir
                          f"(have {sorted(world_cfg['domains'])})")
     start = time.time()
     spec = clips_cfg["splits"][split]
-    dom = world_cfg["domains"][clips_cfg["domain"]]
     cam = clip_camera(world_cfg, clips_cfg)
-    supersample = int(clips_cfg.get("supersample", 1))
     out_dir = Path(out_dir)
     tmp = temp_dir_for(out_dir)
     counts = {"near": 0, "medium": 0, "far": 0}
     speeds, n_ann = [], 0
+    n = spec["clips"]
     try:
         K = cam.K
         (tmp / "calibration.txt").write_text(f"{K[0, 0]:.6f} {K[1, 1]:.6f} {K[0, 2]:.6f} {K[1, 2]:.6f}\n"
                                              f"{clips_cfg['camera_height']:.4f}\n")
-        for c in range(spec["clips"]):
-            mw, rng = clip_motorway(world_cfg, clips_cfg, split, seed, c)
-            view = SceneView(mw.road, mw.style, mw.cars, mw.buildings)
-            folder = tmp / "clips" / str(c + 1) / "imgs"
-            folder.mkdir(parents=True)
-            for i in range(clips_cfg["frames"]):
-                state = motorway_state(mw, i)
-                T_wc = state.T_world_vehicle @ cam.T_vehicle_sensor
-                out = render_camera(cam, T_wc, state.prims, view, dom["appearance"], world_cfg["pixel_noise"],
-                                    clips_cfg["render_distance"], world_cfg["fog_distance"], rng,
-                                    supersample=supersample)
-                write_png(folder / f"{i + 1:03d}.png", out["rgb"])
-            ann = annotate(mw, state, cam, out, clips_cfg, supersample)
-            (folder.parent / "annotation.json").write_text(json.dumps(ann, indent=1))
+        jobs = [(world_cfg, clips_cfg, split, seed, c, tmp / "clips" / str(c + 1)) for c in range(n)]
+        progress = tqdm(total=n, desc=f"clips {split}", unit="clip", mininterval=5)
+        if workers > 1 and n > 1:
+            with ProcessPoolExecutor(max_workers=min(workers, n), mp_context=get_context("fork")) as pool:
+                futures = [pool.submit(render_clip, *job) for job in jobs]
+                for f in as_completed(futures):
+                    f.result()
+                    progress.update()
+                annotations = [f.result() for f in futures]
+        else:
+            annotations = []
+            for job in jobs:
+                annotations.append(render_clip(*job))
+                progress.update()
+        progress.close()
+        for ann in annotations:
             for a in ann:
                 z = a["position"][0]
                 lo, hi = clips_cfg["distance_bins"]
@@ -137,8 +163,8 @@ def write_clips(world_cfg: dict, clips_cfg: dict, split: str, seed: int, out_dir
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
-    n = spec["clips"]
     return {"clips": n, "annotated": n_ann, "annotated_per_clip": n_ann / max(n, 1),
             "near": counts["near"], "medium": counts["medium"], "far": counts["far"],
             "mean_relative_speed": float(np.mean(speeds)) if speeds else 0.0,
-            "velocity_scale": float(spec["velocity_scale"]), "seconds": time.time() - start}
+            "velocity_scale": float(spec["velocity_scale"]), "workers": int(workers),
+            "seconds": time.time() - start}
