@@ -39,7 +39,8 @@ from redsup.world.clips import true_distances, write_clips  # noqa: E402
 
 
 def measure(cfg: dict, width: int, split: str, clips: int, workdir: Path, supersample: int = 1,
-            truth: bool = False) -> dict:
+            truth: bool = False, track_scales=(1.0,)) -> list[dict]:
+    """Render once, then track at each of ``track_scales`` (detection.medianflow.input_scale); one dict each."""
     ccfg = copy.deepcopy(cfg["velocity_clips"])
     ccfg["supersample"] = supersample
     base_w = ccfg["width"]
@@ -49,19 +50,24 @@ def measure(cfg: dict, width: int, split: str, clips: int, workdir: Path, supers
     out = workdir / f"w{width}_k{supersample}"
     t0 = time.perf_counter()
     write_clips(cfg["world"], ccfg, split, cfg["seed"], out)
-    t1 = time.perf_counter()
-    write_medianflow(out, out.with_suffix(".npz"), cfg["detection"]["medianflow"])
-    t2 = time.perf_counter()
-    tracks = load_split(out.with_suffix(".npz"), out, cfg["velocity"]["min_box_px"])
-    d = geometric_diagnosis(tracks, float(ccfg["fps"]))
-    if truth:   # the world's per-frame distances: what limits the tracks (redsup.velocity.diagnosis.truth_diagnosis)
-        distance = np.full(tracks.boxes.shape[:2], np.nan)
-        for c in np.unique(tracks.clip):
-            sel = np.nonzero(tracks.clip == c)[0]
-            distance[sel] = true_distances(cfg["world"], ccfg, split, cfg["seed"], int(c), tracks.track_id[sel])
-        d.update(truth_diagnosis(tracks, distance, float(ccfg["fps"])))
-    return {**d, "render_s_per_clip": (t1 - t0) / clips, "track_s_per_clip": (t2 - t1) / clips,
-            "vehicles": len(tracks), "failed": int(tracks.tracker_failed.sum())}
+    render_s = (time.perf_counter() - t0) / clips
+    rows = []
+    for scale in track_scales:
+        t1 = time.perf_counter()
+        npz = out.with_name(f"{out.name}_s{scale:g}.npz")
+        write_medianflow(out, npz, {**cfg["detection"]["medianflow"], "input_scale": float(scale)})
+        t2 = time.perf_counter()
+        tracks = load_split(npz, out, cfg["velocity"]["min_box_px"])
+        d = geometric_diagnosis(tracks, float(ccfg["fps"]))
+        if truth:   # the world's per-frame distances: what limits the tracks (redsup.velocity.diagnosis)
+            distance = np.full(tracks.boxes.shape[:2], np.nan)
+            for c in np.unique(tracks.clip):
+                sel = np.nonzero(tracks.clip == c)[0]
+                distance[sel] = true_distances(cfg["world"], ccfg, split, cfg["seed"], int(c), tracks.track_id[sel])
+            d.update(truth_diagnosis(tracks, distance, float(ccfg["fps"])))
+        rows.append({**d, "render_s_per_clip": render_s, "track_s_per_clip": (t2 - t1) / clips,
+                     "vehicles": len(tracks), "failed": int(tracks.tracker_failed.sum()), "track_scale": scale})
+    return rows
 
 
 def per_bin(r: dict, key: str, fmt: str) -> str:
@@ -76,6 +82,8 @@ def main(argv=None) -> None:
     p.add_argument("--widths", type=int, nargs="+", default=[320, 640, 1280])
     p.add_argument("--supersample", type=int, nargs="+", default=[1],
                    help="rays per pixel along each axis (velocity_clips.supersample), every width with each")
+    p.add_argument("--track-scales", type=float, nargs="+", default=[1.0],
+                   help="detection.medianflow.input_scale values: frames upscaled before tracking (same render)")
     p.add_argument("--truth", action="store_true",
                    help="also the world's per-frame distances: size change to resolve, tracker error on it, and the "
                         "E_v floor of the clip's mean velocity (relative velocity changing within the clip)")
@@ -85,24 +93,25 @@ def main(argv=None) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for w in args.widths:
             for k in args.supersample:
-                r = measure(cfg, w, args.split, args.clips, Path(tmp), k, args.truth)
-                rows.append((w, k, r))
-                print(f"{w} x {w * 9 // 16}, {k} x {k} rays per pixel: {r['vehicles']} vehicles "
-                      f"({r['failed']} tracker failures), render {r['render_s_per_clip']:.2f} s / clip, "
-                      f"tracking {r['track_s_per_clip']:.2f} s / clip", flush=True)
+                for r in measure(cfg, w, args.split, args.clips, Path(tmp), k, args.truth, args.track_scales):
+                    rows.append((w, k, r))
+                    print(f"{w} x {w * 9 // 16}, {k} x {k} rays per pixel, tracked at x{r['track_scale']:g}: "
+                          f"{r['vehicles']} vehicles ({r['failed']} tracker failures), render "
+                          f"{r['render_s_per_clip']:.2f} s / clip, tracking {r['track_s_per_clip']:.2f} s / clip",
+                          flush=True)
     print(f"\n{args.split} split, first {args.clips} clips; per bin near / medium / far\n")
-    print("| width | rays per pixel | vehicles | last tracked box (px, median) | corr(size-change v_z, true v_z) "
-          "| box bottom motion over the clip (px, median) |")
-    print("|---:|---:|---:|---|---|---|")
+    print("| width | rays per pixel | tracker input scale | vehicles | last tracked box (px, median) "
+          "| corr(size-change v_z, true v_z) | box bottom motion over the clip (px, median) |")
+    print("|---:|---:|---:|---:|---|---|---|")
     for w, k, r in rows:
-        print(f"| {w} | {k} x {k} | {r['vehicles']} | {per_bin(r, 'box_px', '.1f')} | "
+        print(f"| {w} | {k} x {k} | {r['track_scale']:g} | {r['vehicles']} | {per_bin(r, 'box_px', '.1f')} | "
               f"{per_bin(r, 'scale_corr', '.2f')} | {per_bin(r, 'motion_px', '.2f')} |")
     if args.truth:
-        print("\n| width | rays per pixel | std of the true size ratio s_(T-1) / s_1 | std of the tracker's error on it "
-              "| E_v floor of the clip-mean v_z (m^2/s^2) |")
-        print("|---:|---:|---|---|---|")
+        print("\n| width | rays per pixel | tracker input scale | std of the true size ratio s_(T-1) / s_1 "
+              "| std of the tracker's error on it | E_v floor of the clip-mean v_z (m^2/s^2) |")
+        print("|---:|---:|---:|---|---|---|")
         for w, k, r in rows:
-            print(f"| {w} | {k} x {k} | {per_bin(r, 'ratio_signal', '.3f')} | {per_bin(r, 'ratio_noise', '.3f')} | "
+            print(f"| {w} | {k} x {k} | {r['track_scale']:g} | {per_bin(r, 'ratio_signal', '.3f')} | {per_bin(r, 'ratio_noise', '.3f')} | "
                   f"{per_bin(r, 'accel_floor', '.2f')} |")
 
 

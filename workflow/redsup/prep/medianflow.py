@@ -29,9 +29,27 @@ from redsup.sceneio import SceneError, read_json
 BINS = ("near", "medium", "far")
 
 
-def track_backward(frames: list[np.ndarray | None], box_xywh) -> tuple[np.ndarray, np.ndarray]:
+def upscale(frames: list[np.ndarray | None], scale: float) -> list[np.ndarray | None]:
+    """Frames resized by ``scale`` (bilinear; None stays None): the tracker's input. It adds no information,
+    but MedianFlow's windows are fixed in pixels (a 10 x 10 point grid, 3 x 3 Lucas-Kanade windows)."""
+    if scale == 1:
+        return frames
+    return [None if f is None else cv2.resize(f, None, fx=scale, fy=scale, interpolation=cv2.INTER_LINEAR)
+            for f in frames]
+
+
+def track_backward(frames: list[np.ndarray | None], box_xywh, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
     """Track a box given in the last frame backward; ((T, 4) x, y, w, h in forward order, (T,) failed).
-    A frame given as None (missing) is a failed frame: the box is kept and tracking goes on before it."""
+    A frame given as None (missing) is a failed frame: the box is kept and tracking goes on before it.
+    ``scale``: the frames were upscaled by it (``upscale``); the box is given and returned at the original
+    scale (pixel centres map as (x + 0.5) s - 0.5)."""
+    if scale != 1:
+        x, y, w, h = (float(v) for v in box_xywh)
+        boxes, failed = track_backward(frames, ((x + 0.5) * scale - 0.5, (y + 0.5) * scale - 0.5, w * scale,
+                                                h * scale))
+        boxes[:, :2] = (boxes[:, :2] + 0.5) / scale - 0.5
+        boxes[:, 2:] /= scale
+        return boxes, failed
     n = len(frames)
     boxes = np.zeros((n, 4), dtype=np.float32)
     failed = np.zeros(n, dtype=bool)
@@ -121,6 +139,7 @@ def track_split(split_dir: str | Path, medianflow_cfg: dict) -> tuple[dict, dict
     """(arrays of medianflow.npz, summary numbers incl. `problems`) for one clip split."""
     n_frames = medianflow_cfg["n_frames"]
     near, far = medianflow_cfg["near"], medianflow_cfg["far"]
+    scale = float(medianflow_cfg.get("input_scale", 1.0))
     cols = {k: [] for k in ("clip", "track_id", "boxes", "failed", "velocity", "position", "bin_index")}
     dirs = clip_dirs(split_dir)
     problems: list[str] = []
@@ -133,13 +152,14 @@ def track_split(split_dir: str | Path, medianflow_cfg: dict) -> tuple[dict, dict
             n_skipped += 1
             continue
         frames, frame_problems = read_frames(clip_dir, n_frames)
+        frames = upscale(frames, scale)
         if frame_problems:
             n_missing += 1
             problems.extend(f"{p} (a failed frame of every vehicle in the clip)" for p in frame_problems)
         for k, a in enumerate(annotations):
             b = a["bbox"]
             xywh = (b["left"], b["top"], b["right"] - b["left"], b["bottom"] - b["top"])
-            boxes, failed = track_backward(frames, xywh)
+            boxes, failed = track_backward(frames, xywh, scale)
             cols["clip"].append(int(clip_dir.name))
             cols["track_id"].append(int(a.get("track_id", k)))
             cols["boxes"].append(boxes)
