@@ -1,0 +1,41 @@
+"""MLP-tracker E_v against the constant predictor's in a finished build: the ratio and its paired,
+bin-stratified bootstrap over the vehicles (`redsup.velocity.compare`).
+
+    python benchmarks/velocity_ratio.py results/velocity [--split test val] [--a mlp_tracker] [--b constant]
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "workflow"))
+
+from redsup.velocity.compare import per_vehicle_errors, ratio_bootstrap  # noqa: E402
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("velocity_dir", help="a build's results/velocity")
+    ap.add_argument("--split", nargs="+", default=["test", "val"])
+    ap.add_argument("--a", default="mlp_tracker", help="the configuration of the method (numerator)")
+    ap.add_argument("--b", default="constant", help="the configuration of the reference (denominator)")
+    ap.add_argument("--n", type=int, default=2000, help="bootstrap replicates")
+    args = ap.parse_args(argv)
+    for split in args.split:
+        try:
+            a = per_vehicle_errors(args.velocity_dir, args.a, split)
+            b = per_vehicle_errors(args.velocity_dir, args.b, split)
+        except FileNotFoundError as exc:
+            print(f"{split}: {exc}")
+            continue
+        ids = sorted(set(a) & set(b))
+        r = ratio_bootstrap([a[i][1] for i in ids], [b[i][1] for i in ids], [a[i][0] for i in ids], n=args.n)
+        print(f"{split}: {r['n']} vehicles, E_v {args.a} {r['ev_a']:.3f} / {args.b} {r['ev_b']:.3f} = "
+              f"{r['ratio']:.3f} (95 % [{r['ratio_lo']:.3f}, {r['ratio_hi']:.3f}]); "
+              f"{args.b} - {args.a} {r['diff']:.3f} [{r['diff_lo']:.3f}, {r['diff_hi']:.3f}]")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

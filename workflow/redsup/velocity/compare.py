@@ -1,0 +1,65 @@
+"""Is one velocity method's E_v a given fraction of another's? A paired, bin-stratified bootstrap of the ratio.
+
+Issue 11 asks whether the MLP-tracker's E_v is at most 0.5 x the constant predictor's on the test clips. Both
+methods are scored on the same vehicles, so the comparison resamples vehicles, not methods: every bootstrap
+replicate draws, within each distance bin, as many vehicles as the bin has (with replacement) and recomputes both
+E_v (the mean of the bin means, as `metrics.binned_error`) on that same draw. A method trained with several seeds
+enters with each vehicle's squared error averaged over its seeds (E_v is linear in it, so the point value is the
+mean of the seeds' E_v).
+"""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+
+
+def _ev(err: np.ndarray, bins: np.ndarray, idx_per_bin: list[np.ndarray]) -> np.ndarray:
+    """E_v of every replicate: idx_per_bin[k] is (B, n_k) indices into bin k's vehicles."""
+    means = [err[bins == k][idx].mean(axis=1) for k, idx in idx_per_bin]
+    return np.mean(means, axis=0)
+
+
+def ratio_bootstrap(err_a, err_b, bins, n: int = 2000, seed: int = 0, level: float = 0.95) -> dict:
+    """E_v(a) / E_v(b) and E_v(b) - E_v(a) on the same vehicles with their bootstrap intervals.
+
+    err_a, err_b: per-vehicle squared velocity errors (same order); bins: their distance bin (0 near, 1 medium,
+    2 far). Returns {ratio, ratio_lo, ratio_hi, diff, diff_lo, diff_hi, ev_a, ev_b, n}.
+    """
+    err_a, err_b, bins = (np.asarray(a) for a in (err_a, err_b, bins))
+    if not (len(err_a) == len(err_b) == len(bins)) or len(bins) == 0:
+        raise ValueError(f"ratio_bootstrap: {len(err_a)} / {len(err_b)} errors for {len(bins)} vehicles")
+    if not (np.isfinite(err_a).all() and np.isfinite(err_b).all()):
+        raise ValueError("ratio_bootstrap: a squared error is not finite")
+    rng = np.random.default_rng(seed)
+    present = [int(k) for k in np.unique(bins)]
+    idx = [(k, rng.integers(0, int((bins == k).sum()), size=(n, int((bins == k).sum())))) for k in present]
+    ident = [(k, np.arange(int((bins == k).sum()))[None, :]) for k in present]
+    ev_a, ev_b = float(_ev(err_a, bins, ident)[0]), float(_ev(err_b, bins, ident)[0])
+    rep_a, rep_b = _ev(err_a, bins, idx), _ev(err_b, bins, idx)
+    q = [(1 - level) / 2 * 100, (1 + level) / 2 * 100]
+    r_lo, r_hi = np.percentile(rep_a / rep_b, q)
+    d_lo, d_hi = np.percentile(rep_b - rep_a, q)
+    return {"ratio": ev_a / ev_b, "ratio_lo": float(r_lo), "ratio_hi": float(r_hi), "diff": ev_b - ev_a,
+            "diff_lo": float(d_lo), "diff_hi": float(d_hi), "ev_a": ev_a, "ev_b": ev_b, "n": int(len(bins))}
+
+
+def per_vehicle_errors(velocity_dir: str | Path, name: str, split: str) -> dict[str, tuple[int, float]]:
+    """{vehicle id: (bin, squared error averaged over the configuration's runs)} from a build's
+    results/velocity/*/metrics.json (every run of configuration `name`, e.g. mlp_tracker and its seeds)."""
+    runs = []
+    for path in sorted(Path(velocity_dir).glob("*/metrics.json")):
+        record = json.loads(path.read_text())
+        if record.get("name") == name and split in record.get("per_track", {}):
+            runs.append(record["per_track"][split])
+    if not runs:
+        raise FileNotFoundError(f"{velocity_dir}: no metrics.json of configuration {name!r} and split {split!r}")
+    out = {}
+    for i, vid in enumerate(runs[0]["id"]):
+        errs = []
+        for pt in runs:
+            j = pt["id"].index(vid)
+            errs.append(np.nan if pt["sq_err"][j] is None else float(pt["sq_err"][j]))
+        out[vid] = (int(runs[0]["bin"][i]), float(np.mean(errs)))
+    return out
