@@ -14,6 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
+from redsup.velocity.metrics import binned_error
+
 
 def _ev(err: np.ndarray, bins: np.ndarray, idx_per_bin: list[np.ndarray]) -> np.ndarray:
     """E_v of every replicate: idx_per_bin[k] is (B, n_k) indices into bin k's vehicles."""
@@ -35,8 +37,7 @@ def ratio_bootstrap(err_a, err_b, bins, n: int = 2000, seed: int = 0, level: flo
     rng = np.random.default_rng(seed)
     present = [int(k) for k in np.unique(bins)]
     idx = [(k, rng.integers(0, int((bins == k).sum()), size=(n, int((bins == k).sum())))) for k in present]
-    ident = [(k, np.arange(int((bins == k).sum()))[None, :]) for k in present]
-    ev_a, ev_b = float(_ev(err_a, bins, ident)[0]), float(_ev(err_b, bins, ident)[0])
+    ev_a, ev_b = (binned_error(e, bins, "E_v")["E_v"] for e in (err_a, err_b))
     rep_a, rep_b = _ev(err_a, bins, idx), _ev(err_b, bins, idx)
     q = [(1 - level) / 2 * 100, (1 + level) / 2 * 100]
     r_lo, r_hi = np.percentile(rep_a / rep_b, q)
@@ -55,11 +56,11 @@ def per_vehicle_errors(velocity_dir: str | Path, name: str, split: str) -> dict[
             runs.append(record["per_track"][split])
     if not runs:
         raise FileNotFoundError(f"{velocity_dir}: no metrics.json of configuration {name!r} and split {split!r}")
+    by_run = [dict(zip(pt["id"], pt["sq_err"])) for pt in runs]
     out = {}
-    for i, vid in enumerate(runs[0]["id"]):
-        errs = []
-        for pt in runs:
-            j = pt["id"].index(vid)
-            errs.append(np.nan if pt["sq_err"][j] is None else float(pt["sq_err"][j]))
-        out[vid] = (int(runs[0]["bin"][i]), float(np.mean(errs)))
+    for vid, b in zip(runs[0]["id"], runs[0]["bin"]):
+        if any(vid not in r for r in by_run):
+            raise ValueError(f"{velocity_dir}: vehicle {vid} of {name!r} ({split}) is missing from one of its seeds")
+        errs = [np.nan if r[vid] is None else float(r[vid]) for r in by_run]
+        out[vid] = (int(b), float(np.mean(errs)))
     return out

@@ -10,7 +10,9 @@ from __future__ import annotations
 import json
 import shutil
 import time
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import ProcessPoolExecutor
+from contextlib import nullcontext
+from itertools import repeat
 from multiprocessing import get_context
 from pathlib import Path
 
@@ -137,28 +139,19 @@ def write_clips(world_cfg: dict, clips_cfg: dict, split: str, seed: int, out_dir
         K = cam.K
         (tmp / "calibration.txt").write_text(f"{K[0, 0]:.6f} {K[1, 1]:.6f} {K[0, 2]:.6f} {K[1, 2]:.6f}\n"
                                              f"{clips_cfg['camera_height']:.4f}\n")
-        jobs = [(world_cfg, clips_cfg, split, seed, c, tmp / "clips" / str(c + 1)) for c in range(n)]
-        progress = tqdm(total=n, desc=f"clips {split}", unit="clip", mininterval=5)
-        if workers > 1 and n > 1:
-            with ProcessPoolExecutor(max_workers=min(workers, n), mp_context=get_context("fork")) as pool:
-                futures = [pool.submit(render_clip, *job) for job in jobs]
-                for f in as_completed(futures):
-                    f.result()
-                    progress.update()
-                annotations = [f.result() for f in futures]
-        else:
-            annotations = []
-            for job in jobs:
-                annotations.append(render_clip(*job))
-                progress.update()
-        progress.close()
-        for ann in annotations:
-            for a in ann:
-                z = a["position"][0]
-                lo, hi = clips_cfg["distance_bins"]
-                counts["near" if z < lo else "medium" if z < hi else "far"] += 1
-                speeds.append(np.hypot(*a["velocity"]))
-            n_ann += len(ann)
+        folders = [tmp / "clips" / str(c + 1) for c in range(n)]
+        parallel = workers > 1 and n > 1
+        lo, hi = clips_cfg["distance_bins"]
+        with (ProcessPoolExecutor(max_workers=min(workers, n), mp_context=get_context("fork")) if parallel
+              else nullcontext()) as pool:
+            rendered = (pool.map if parallel else map)(render_clip, repeat(world_cfg), repeat(clips_cfg),
+                                                       repeat(split), repeat(seed), range(n), folders)
+            for ann in tqdm(rendered, total=n, desc=f"clips {split}", unit="clip", mininterval=5):
+                for a in ann:
+                    z = a["position"][0]
+                    counts["near" if z < lo else "medium" if z < hi else "far"] += 1
+                    speeds.append(np.hypot(*a["velocity"]))
+                n_ann += len(ann)
         publish(tmp, out_dir)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
