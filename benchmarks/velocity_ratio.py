@@ -2,6 +2,7 @@
 bin-stratified bootstrap over the vehicles (`redsup.velocity.compare`).
 
     python benchmarks/velocity_ratio.py results/velocity [--split test val] [--a mlp_tracker] [--b constant]
+        [--clips FIRST STOP]      # only the vehicles of clips FIRST <= clip < STOP
 """
 from __future__ import annotations
 
@@ -11,7 +12,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "workflow"))
 
-from redsup.velocity.compare import per_vehicle_errors, ratio_bootstrap  # noqa: E402
+from redsup.velocity.compare import in_clips, per_vehicle_errors, ratio_bootstrap  # noqa: E402
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -21,6 +22,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--a", default="mlp_tracker", help="the configuration of the method (numerator)")
     ap.add_argument("--b", default="constant", help="the configuration of the reference (denominator)")
     ap.add_argument("--n", type=int, default=2000, help="bootstrap replicates")
+    ap.add_argument("--clips", nargs=2, type=int, metavar=("FIRST", "STOP"),
+                    help="only the vehicles of clips FIRST <= clip < STOP (e.g. the clips an enlarged split gained)")
     args = ap.parse_args(argv)
     for split in args.split:
         try:
@@ -29,7 +32,12 @@ def main(argv: list[str] | None = None) -> int:
         except FileNotFoundError as exc:
             print(f"{split}: {exc}")
             continue
+        if args.clips:
+            a, b = (in_clips(e, *args.clips) for e in (a, b))
         ids = sorted(set(a) & set(b))
+        if not ids:
+            print(f"{split}: no vehicle in clips {args.clips}")
+            continue
         r = ratio_bootstrap([a[i][1] for i in ids], [b[i][1] for i in ids], [a[i][0] for i in ids], n=args.n)
         print(f"{split}: {r['n']} vehicles, E_v {args.a} {r['ev_a']:.3f} / {args.b} {r['ev_b']:.3f} = "
               f"{r['ratio']:.3f} (95 % [{r['ratio_lo']:.3f}, {r['ratio_hi']:.3f}]); "

@@ -6,7 +6,7 @@ import json
 import numpy as np
 import pytest
 
-from redsup.velocity.compare import per_vehicle_errors, ratio_bootstrap
+from redsup.velocity.compare import in_clips, per_vehicle_errors, ratio_bootstrap
 
 
 def test_ratio_is_the_ratio_of_the_bin_means_by_hand():
@@ -59,3 +59,11 @@ def test_per_vehicle_errors_average_a_configuration_over_its_seeds(tmp_path):
     assert per_vehicle_errors(tmp_path, "constant", "test") == {"0/1": (0, 4.0), "3/2": (2, 4.0)}
     with pytest.raises(FileNotFoundError, match="'mlp_tracker' and split 'val'"):
         per_vehicle_errors(tmp_path, "mlp_tracker", "val")
+
+
+def test_in_clips_keeps_the_vehicles_of_a_clip_range():
+    errs = {"0/1": (0, 1.0), "39/2": (1, 2.0), "40/1": (2, 3.0), "159/4": (0, 4.0), "160/1": (1, 5.0)}
+    assert in_clips(errs, 40, 160) == {"40/1": (2, 3.0), "159/4": (0, 4.0)}
+    assert in_clips(errs, 0, 40) == {"0/1": (0, 1.0), "39/2": (1, 2.0)}
+    with pytest.raises(ValueError, match="'car7' is not"):
+        in_clips({"car7": (0, 1.0)}, 0, 10)

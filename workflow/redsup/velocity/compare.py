@@ -64,3 +64,15 @@ def per_vehicle_errors(velocity_dir: str | Path, name: str, split: str) -> dict[
         errs = [np.nan if r[vid] is None else float(r[vid]) for r in by_run]
         out[vid] = (int(b), float(np.mean(errs)))
     return out
+
+
+def in_clips(errors: dict[str, tuple[int, float]], first: int, stop: int) -> dict[str, tuple[int, float]]:
+    """The vehicles of clips first <= clip < stop (a vehicle id is "<clip>/<track>"), e.g. the clips a split
+    gained when it was enlarged, which no earlier look at the split has seen."""
+    def clip(vid: str) -> int:
+        head, sep, _ = vid.partition("/")
+        if not sep or not head.isdigit():
+            raise ValueError(f"vehicle id {vid!r} is not '<clip>/<track>'")
+        return int(head)
+
+    return {vid: e for vid, e in errors.items() if first <= clip(vid) < stop}
