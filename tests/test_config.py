@@ -39,3 +39,18 @@ def test_hash_is_stable_and_sensitive():
     b = config.load(ROOT / "config.yaml", {"profile": "tiny"})
     c = config.load(ROOT / "config.yaml", {"profile": "default"})
     assert config.config_hash(a) == config.config_hash(b) != config.config_hash(c)
+
+
+def test_every_profile_crops_and_resizes_the_world_without_distortion():
+    # the prepared image keeps the aspect of the crop: a profile that scales the raw frames must scale the crop
+    # and the resize with them (the paper profile once kept the default's 208 x 64 on 3x frames: 2.4 x vs 1.6 x)
+    for profile in config.PROFILES:
+        cfg = config.load(ROOT / "config.yaml", {"profile": profile})
+        for name, spec in cfg["datasets"].items():
+            if spec["kind"] != "world":
+                continue
+            raw, crop, out = cfg["world"]["domains"][spec["domain"]], spec["crop"], spec["resize"]
+            cut_w = raw["width"] - crop["left"] - crop["right"]
+            cut_h = raw["height"] - crop["top"] - crop["bottom"]
+            sx, sy = cut_w / out["width"], cut_h / out["height"]
+            assert sx == pytest.approx(sy, rel=0.02), f"{profile} {name}: {cut_w} x {cut_h} -> {out}"

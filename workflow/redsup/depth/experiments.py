@@ -58,9 +58,12 @@ class EvalSequence:
 
 
 def _predict(models, batch: Mapping, meta: Mapping, branch: str = "") -> np.ndarray:
-    """Depth (H, W) of the batch-of-one ``batch`` (``target``; ``prev`` / ``K`` for multi-frame systems)."""
-    prev = batch.get("prev", batch.get("sources", {}).get("prev"))
-    d = systems.predict_depth(models, meta, batch["target"], prev, batch.get("K"), branch)
+    """Depth (H, W) of the batch-of-one ``batch`` (``target``; ``prev`` / ``K`` for multi-frame systems), moved to
+    the networks' device (a training job's validation pass builds its batches on the CPU)."""
+    dev = next(p for m in models.values() for p in m.parameters()).device
+    prev, K = batch.get("prev", batch.get("sources", {}).get("prev")), batch.get("K")
+    d = systems.predict_depth(models, meta, batch["target"].to(dev), None if prev is None else prev.to(dev),
+                              None if K is None else K.to(dev), branch)
     return d[0, 0].detach().cpu().numpy()
 
 

@@ -156,6 +156,7 @@ def heatmap_target(batch: int, height: int, width: int, frame: torch.Tensor, cel
     |dr|, |dc| <= r, one per object (frame (N,), cells (N, 2) long, radius (N,) cells); rows with cell -1
     are ignored."""
     heat = torch.zeros((batch, 1, height, width), dtype=dtype, device=device)
+    cells, frame, radius = cells.cpu(), frame.cpu(), radius.cpu()   # read as numbers; the voted cells are on the device
     ok = cells[:, 0] >= 0
     rows = torch.arange(height, device=device, dtype=dtype)
     cols = torch.arange(width, device=device, dtype=dtype)
