@@ -286,3 +286,20 @@ def test_model_seed_is_the_training_seed_of_a_model_id():
     assert configs.model_seed(0, "world_kitti/M") == 72623
     with pytest.raises(ValueError, match="not a depth model id"):
         configs.model_seed(0, "world_kitti")
+
+
+def test_prediction_batches_go_to_the_networks_device(monkeypatch):
+    # a training job builds its validation batches on the CPU; _predict hands them to the networks' device
+    # (on CUDA the first validation pass of M / MD / FD failed before). Here the networks sit on the meta device.
+    seen = {}
+
+    def fake_predict(models, meta, target, prev, K, branch):
+        seen.update(target=target.device, prev=prev.device, K=K.device)
+        return torch.zeros(1, 1, *target.shape[-2:])
+
+    monkeypatch.setattr(experiments.systems, "predict_depth", fake_predict)
+    models = torch.nn.ModuleDict({"depth_encoder": torch.nn.Linear(2, 2, device="meta")})
+    batch = {"target": torch.rand(1, 3, 4, 6), "prev": torch.rand(1, 3, 4, 6), "K": torch.eye(3)[None]}
+    depth = experiments._predict(models, batch, {})
+    assert seen == {"target": torch.device("meta"), "prev": torch.device("meta"), "K": torch.device("meta")}
+    assert depth.shape == (4, 6)
