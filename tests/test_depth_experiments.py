@@ -65,7 +65,7 @@ def test_rows_of_every_table_at_default(cfg):
     assert t41[2].spec.name == t41[0].spec.name + "_teacher" and t41[0].spec.key() != t41[2].spec.key()
     assert len(rows["galteland_table4_1"]) == 3 * 3
     available, cameras = plan._available(cfg, _scenes_of(cfg))
-    assert available["world_kitti"]["val"] == 1
+    assert available["world_kitti"]["val"] == 2
     models = configs.trained_models(cfg["depth"], {d: a["train"] for d, a in available.items()}, cameras)
     assert set(models) == {"world_kitti/M", "world_kitti/S", "world_kitti/MS", "world_cityscapes/M", "world_kitti/MD",
                            "world_kitti/FD", "world_lyft/MD", "world_lyft/MD_frontback", "world_lyft/FD",
