@@ -236,20 +236,16 @@ def detector_split(path: Path, cfg: dict, grid: GridSpec, n_frames: int, rng) ->
 
 
 def detector_loss(model, data, run, grid: GridSpec, spec, template, device) -> torch.Tensor:
-    """train.train's weak loss (heatmap + alignment + yaw) on frames 0 and 1, without augmentation."""
-    frames, bev, tmpl = [0, 1], grid.bev(), template.to(device=device)
+    """train.train's weak loss (``weak_terms``, ``heatmap_term``, ``weighted_loss``) on frames 0 and 1, without
+    augmentation."""
+    frames, tmpl = [0, 1], template.to(device=device)
     out = model.train()([torch.from_numpy(data.points(f)).to(device) for f in frames])
-    B, _, H, W = out["heatmap"].shape
-    loss_fn = ld_loss.alignment_loss(run.loss, run.alpha, run.beta)
-    objs = ld_targets.weak_objects([data.objects(f) for f in frames], spec.min_points, spec.max_points,
-                                   np.random.default_rng(0))
-    assign = ld_targets.assign_weak(bev, out, objs, run.window, loss_fn, tmpl, spec.vote_yaw, spec.vote_points)
     r = ld_targets.object_radius(float(template.size[0]), float(template.size[1]), grid.cell, spec.min_radius)
-    heat = ld_targets.heatmap_target(B, H, W, objs.frame, assign.cell, torch.full((len(objs),), float(r)),
-                                     device=device)
-    al = ld_loss.weak_alignment(out, bev, assign, objs, loss_fn, tmpl)
-    hm, n_pos = ld_loss.focal_heatmap_loss(out["heatmap"], heat)
-    return hm.sum() / n_pos.clamp_min(1.0) + al["alignment"].mean() + al["yaw_ce"].mean()
+    terms, heat, _, _ = ld_train.weak_terms(out, grid.bev(), [data.objects(f) for f in frames], run, spec,
+                                            ld_loss.alignment_loss(run.loss, run.alpha, run.beta), tmpl, r,
+                                            np.random.default_rng(0))
+    weights = {"heatmap": 1.0, "alignment": 1.0, "yaw": 1.0, **spec.weights}
+    return ld_train.weighted_loss({**terms, "heatmap": ld_train.heatmap_term(out, heat)}, weights)
 
 
 def detector_case(cfg: dict, conf: str, args, device: torch.device, tmp: Path) -> dict:

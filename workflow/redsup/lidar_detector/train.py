@@ -98,6 +98,36 @@ def _batches(n_frames: int, batch: int, rng: np.random.Generator):
             yield perm[s:s + batch]
 
 
+def weak_terms(out: dict, bev, object_sets, run: RunSpec, spec: TrainSpec, loss_fn, tmpl: Template, radius: float,
+               rng: np.random.Generator, gen: torch.Generator | None = None):
+    """The 2D-mask (weak) terms of one batch: each object's L_m subsampled, its cell voted (multi-cell voting within
+    ``run.window``), the heatmap target at the voted cells, the alignment and yaw terms there. Returns (terms
+    {alignment, yaw, vote_loss (detached, logged only)}: empty without a valid object, heatmap target, objects,
+    assignment)."""
+    B, _, H, W = out["heatmap"].shape
+    objs = weak_objects(object_sets, spec.min_points, spec.max_points, rng)
+    assign = assign_weak(bev, out, objs, run.window, loss_fn, tmpl, spec.vote_yaw, spec.vote_points, gen)
+    heat = heatmap_target(B, H, W, objs.frame, assign.cell, torch.full((len(objs),), float(radius)),
+                          device=out["heatmap"].device)
+    al = weak_alignment(out, bev, assign, objs, loss_fn, tmpl)
+    terms = {}
+    if len(al["alignment"]):
+        terms = {"alignment": al["alignment"].mean(), "yaw": al["yaw_ce"].mean(),
+                 "vote_loss": assign.vote.loss[assign.valid].mean().detach()}
+    return terms, heat, objs, assign
+
+
+def heatmap_term(out: dict, heat: torch.Tensor) -> torch.Tensor:
+    """Focal heatmap loss summed over the cells, over the number of positive cells (at least 1)."""
+    hm_map, n_pos = focal_heatmap_loss(out["heatmap"], heat)
+    return hm_map.sum() / n_pos.clamp_min(1.0)
+
+
+def weighted_loss(terms: dict, weights: dict) -> torch.Tensor:
+    """The scalar minimised: the weighted sum of the terms (``vote_loss`` is logged, not minimised)."""
+    return sum(weights[k] * v for k, v in terms.items() if k != "vote_loss")
+
+
 def train(data: SplitData, run: RunSpec, grid: GridSpec, spec: TrainSpec, aug: AugmentSpec, template: Template,
           n_bins: int = 64, net: dict | None = None, seed: int = 0, device: str = "cpu",
           log: Callable[[dict, int], None] | None = None) -> tuple[CenterDetector, dict]:
@@ -134,18 +164,10 @@ def train(data: SplitData, run: RunSpec, grid: GridSpec, spec: TrainSpec, aug: A
         terms: dict[str, torch.Tensor] = {}
         if weak:
             sets = [[tf.points(s) for s in data.objects(int(f))] for tf, f in zip(tfs, idx)]
-            objs = weak_objects(sets, spec.min_points, spec.max_points, rng)
+            terms, heat_t, objs, assign = weak_terms(out, bev, sets, run, spec, loss_fn, tmpl, radius_weak, rng, gen)
             counts["objects_few_points"] += objs.n_skipped
-            assign = assign_weak(bev, out, objs, run.window, loss_fn, tmpl, spec.vote_yaw, spec.vote_points, gen)
             counts["objects_outside_grid"] += int((~assign.valid).sum())
             counts["objects_used"] += int(assign.valid.sum())
-            heat_t = heatmap_target(B, H, W, objs.frame, assign.cell, torch.full((len(objs),), float(radius_weak)),
-                                    device=device)
-            al = weak_alignment(out, bev, assign, objs, loss_fn, tmpl)
-            if len(al["alignment"]):
-                terms["alignment"] = al["alignment"].mean()
-                terms["yaw"] = al["yaw_ce"].mean()
-                terms["vote_loss"] = assign.vote.loss[assign.valid].mean().detach()
         else:
             boxes = [tf.boxes(data.supervised_boxes(int(f), spec.min_points)) for tf, f in zip(tfs, idx)]
             tg = assign_supervised(bev, boxes, n_bins, template.size, spec.min_radius)
@@ -158,9 +180,8 @@ def train(data: SplitData, run: RunSpec, grid: GridSpec, spec: TrainSpec, aug: A
                 terms["yaw"] = sup["yaw_ce"].mean()
                 if "size_l1" in sup:
                     terms["size"] = sup["size_l1"].mean()
-        hm_map, n_pos = focal_heatmap_loss(out["heatmap"], heat_t)
-        terms["heatmap"] = hm_map.sum() / n_pos.clamp_min(1.0)
-        loss = sum(w[k] * v for k, v in terms.items() if k != "vote_loss")
+        terms["heatmap"] = heatmap_term(out, heat_t)
+        loss = weighted_loss(terms, w)
         counts["frames_seen"] += len(idx)
         if not torch.isfinite(loss):
             counts["steps_nonfinite"] += 1
