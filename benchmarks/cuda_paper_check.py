@@ -40,7 +40,6 @@ from pathlib import Path
 import numpy as np
 import torch
 import torch.nn.functional as F
-import yaml
 
 from redsup import config as config_mod
 from redsup.determinism import configure
@@ -52,6 +51,7 @@ from redsup.lidar_detector.grid import GridSpec
 from redsup.lifting import criterion as lift_criterion, data as lift_data, model as lift_model
 from redsup.lifting import postprocess as lift_post, train as lift_train
 from redsup.velocity import geometry as vel_geometry, mlp as vel_mlp
+from redsup.world import sensors as world_sensors
 
 ROOT = Path(__file__).resolve().parents[1]
 FAMILIES = ("depth", "detector", "lifting", "velocity")
@@ -202,9 +202,7 @@ def detector_split(path: Path, cfg: dict, grid: GridSpec, n_frames: int, rng) ->
     behind, and their ground-truth rows)."""
     dom = cfg["world"]["domains"][cfg["datasets"][cfg["lidar_detector"]["dataset"]]["domain"]]
     lidar, size = cfg["world"]["lidar"], (int(dom["width"]), int(dom["height"]))
-    half = math.radians(dom["hfov_deg"]) / 2
-    fx = size[0] / 2 / math.tan(half)
-    K = np.array([[fx, 0.0, (size[0] - 1) / 2], [0.0, fx, (size[1] - 1) / 2], [0.0, 0.0, 1.0]])
+    half, K = math.radians(dom["hfov_deg"]) / 2, world_sensors.intrinsics(*size, dom["hfov_deg"])
     T_cam = np.linalg.inv(np.array([[0, 0, 1, cfg["world"]["rig"]["camera_x"]], [-1, 0, 0, 0],
                                     [0, -1, 0, dom["camera_height"]], [0, 0, 0, 1.0]]))   # T_camera_vehicle
     n = int(lidar["beams"] * lidar["azimuth_steps"] * dom["hfov_deg"] / 360)
@@ -329,9 +327,9 @@ def lifting_case(cfg: dict, args, device: torch.device) -> dict:
 def velocity_case(cfg: dict, args, device: torch.device) -> dict:
     v, clip = cfg["velocity"], cfg["velocity_clips"]
     m, n, T = v["mlp"], int(v["synthetic"]["samples"]), int(cfg["detection"]["medianflow"]["n_frames"])
-    fx = clip["width"] / 2 / math.tan(math.radians(clip["hfov_deg"]) / 2)
-    cal = vel_geometry.Calibration(fx, fx, (clip["width"] - 1) / 2, (clip["height"] - 1) / 2,
-                                   float(clip["camera_height"]))
+    K = world_sensors.intrinsics(clip["width"], clip["height"], clip["hfov_deg"])
+    fx = K[0, 0]
+    cal = vel_geometry.Calibration(fx, fx, K[0, 2], K[1, 2], float(clip["camera_height"]))
     rng = np.random.default_rng(0)
     Z = rng.uniform(8, 90, (n, 1)) - rng.uniform(-1, 1, (n, 1)) * np.arange(T) / clip["fps"]   # (n, T) metres
     X = rng.uniform(-6, 6, (n, 1))
@@ -449,9 +447,7 @@ def main() -> None:
     ap.add_argument("--threads", type=int, default=0, help="torch threads (0: each rule's threads)")
     args = ap.parse_args()
     args.out.mkdir(parents=True, exist_ok=True)
-    raw = yaml.safe_load((ROOT / "config.yaml").read_text())
-    raw["profile"] = args.profile
-    cfg = config_mod.resolve(raw)
+    cfg = config_mod.load(ROOT / "config.yaml", {"profile": args.profile})
     device = torch.device(args.device)
     report = {"profile": args.profile, "steps": args.steps, "environment": environment(device), "rows": []}
     print("\n".join(f"{k}: {v}" for k, v in report["environment"].items()) + "\n" + HEADER, flush=True)
