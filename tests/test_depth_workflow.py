@@ -20,8 +20,8 @@ def test_models_load_with_their_meta(built):
             "world_kitti/FD", "world_lyft/MD", "world_lyft/MD_frontback", "world_lyft/FD", "world_ddad/MD"} <= names
     nets, meta = checkpoint.load(built / "results/depth/models/world_kitti/M.pt")
     assert set(nets) == {"depth_encoder", "depth_decoder", "pose_encoder", "pose_decoder"}
-    # depth.modes.M.input_scale 0.5 of the prepared 32 x 104; S trains at the prepared size
-    assert meta["mode"] == "M" and meta["sources"] == ["prev", "next"] and (meta["height"], meta["width"]) == (16, 52)
+    # depth.modes.M.input_scale 1.0: M trains at the prepared 32 x 104, as S does (MD below: half of it)
+    assert meta["mode"] == "M" and meta["sources"] == ["prev", "next"] and (meta["height"], meta["width"]) == (32, 104)
     assert meta["min_depth"] == 0.1 and meta["max_depth"] == 100.0 and meta["train"]["steps"] == 12
     _, meta = checkpoint.load(built / "results/depth/models/world_kitti/S.pt")
     assert meta["sources"] == ["stereo"] and (meta["height"], meta["width"]) == (32, 104)
