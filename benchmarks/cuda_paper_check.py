@@ -242,8 +242,7 @@ def detector_loss(model, data, run, grid: GridSpec, spec, template, device) -> t
     terms, heat, _, _ = ld_train.weak_terms(out, grid.bev(), [data.objects(f) for f in frames], run, spec,
                                             ld_loss.alignment_loss(run.loss, run.alpha, run.beta), tmpl, r,
                                             np.random.default_rng(0))
-    weights = {"heatmap": 1.0, "alignment": 1.0, "yaw": 1.0, **spec.weights}
-    return ld_train.weighted_loss({**terms, "heatmap": ld_train.heatmap_term(out, heat)}, weights)
+    return ld_train.weighted_loss({**terms, "heatmap": ld_train.heatmap_term(out, heat)}, spec.weights)
 
 
 def detector_case(cfg: dict, conf: str, args, device: torch.device, tmp: Path) -> dict:
@@ -328,12 +327,12 @@ def velocity_case(cfg: dict, args, device: torch.device) -> dict:
     v, clip = cfg["velocity"], cfg["velocity_clips"]
     m, n, T = v["mlp"], int(v["synthetic"]["samples"]), int(cfg["detection"]["medianflow"]["n_frames"])
     K = world_sensors.intrinsics(clip["width"], clip["height"], clip["hfov_deg"])
-    fx = K[0, 0]
-    cal = vel_geometry.Calibration(fx, fx, K[0, 2], K[1, 2], float(clip["camera_height"]))
+    cal = vel_geometry.Calibration(K[0, 0], K[1, 1], K[0, 2], K[1, 2], float(clip["camera_height"]))
     rng = np.random.default_rng(0)
     Z = rng.uniform(8, 90, (n, 1)) - rng.uniform(-1, 1, (n, 1)) * np.arange(T) / clip["fps"]   # (n, T) metres
     X = rng.uniform(-6, 6, (n, 1))
-    boxes = np.stack([cal.cx + fx * X / Z, cal.cy + fx * cal.height / Z, fx * 1.8 / Z, fx * 1.5 / Z], axis=-1)
+    boxes = np.stack([cal.cx + cal.fx * X / Z, cal.cy + cal.fy * cal.height / Z, cal.fx * 1.8 / Z, cal.fy * 1.5 / Z],
+                     axis=-1)
     x = vel_mlp.box_features(boxes, cal, float(v["smoothing"]["synthetic"]["train"]), m.get("features", "absolute"))
     y, k = rng.normal(0.0, [1.0, 3.0], (n, 2)), max(1, n // 10)
     clock = StepClock(device)

@@ -124,8 +124,9 @@ def heatmap_term(out: dict, heat: torch.Tensor) -> torch.Tensor:
 
 
 def weighted_loss(terms: dict, weights: dict) -> torch.Tensor:
-    """The scalar minimised: the weighted sum of the terms (``vote_loss`` is logged, not minimised)."""
-    return sum(weights[k] * v for k, v in terms.items() if k != "vote_loss")
+    """The scalar minimised: the weighted sum of the terms, a term without a weight counting 1 (``vote_loss`` is
+    logged, not minimised)."""
+    return sum(weights.get(k, 1.0) * v for k, v in terms.items() if k != "vote_loss")
 
 
 def train(data: SplitData, run: RunSpec, grid: GridSpec, spec: TrainSpec, aug: AugmentSpec, template: Template,
@@ -148,7 +149,6 @@ def train(data: SplitData, run: RunSpec, grid: GridSpec, spec: TrainSpec, aug: A
     loss_fn = alignment_loss(run.loss, run.alpha, run.beta)
     weak = run.supervision == "masks"
     radius_weak = object_radius(float(template.size[0]), float(template.size[1]), grid.cell, spec.min_radius)
-    w = {"heatmap": 1.0, "alignment": 1.0, "yaw": 1.0, "offset": 1.0, "size": 1.0, **spec.weights}
     counts = {"objects_used": 0, "objects_outside_grid": 0, "objects_few_points": 0, "steps_nonfinite": 0,
               "frames_seen": 0}
     running: dict[str, list[float]] = {}
@@ -181,7 +181,7 @@ def train(data: SplitData, run: RunSpec, grid: GridSpec, spec: TrainSpec, aug: A
                 if "size_l1" in sup:
                     terms["size"] = sup["size_l1"].mean()
         terms["heatmap"] = heatmap_term(out, heat_t)
-        loss = weighted_loss(terms, w)
+        loss = weighted_loss(terms, spec.weights)
         counts["frames_seen"] += len(idx)
         if not torch.isfinite(loss):
             counts["steps_nonfinite"] += 1
