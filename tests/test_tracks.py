@@ -139,8 +139,8 @@ def render_clip(velocity_px=(1.5, 0.5), start=(40.0, 30.0), size=(40, 30), seed=
 
 def test_medianflow_recovers_known_image_motion():
     frames, truth = render_clip()
-    boxes, failed = track_backward(frames, truth[-1])
-    assert boxes.shape == (40, 4) and not failed.any()
+    boxes, failed, gated = track_backward(frames, truth[-1], max_scale_step=0.1)
+    assert boxes.shape == (40, 4) and not failed.any() and not gated.any()   # a smooth track: the gate is silent
     assert np.abs(boxes[:, :2] - truth[:, :2]).max() < 1.0
     assert np.abs(np.diff(boxes[:, :2], axis=0) - [1.5, 0.5]).max() < 1.0
     assert np.abs(boxes[:, 2:] - truth[:, 2:]).max() < 1.5
@@ -152,13 +152,50 @@ def test_medianflow_on_upscaled_frames_returns_boxes_at_the_clip_scale():
     frames, truth = render_clip(size=(12, 9))
     scaled = upscale(frames, 2.0)
     assert scaled[0].shape == (2 * H, 2 * W, 3) and upscale(frames, 1.0) is frames and upscale([None], 2.0) == [None]
-    boxes, failed = track_backward(scaled, truth[-1], scale=2.0)
+    boxes, failed, _ = track_backward(scaled, truth[-1], scale=2.0)
     assert not failed.any()
     assert np.abs(boxes[:, :2] - truth[:, :2]).max() < 1.0
     assert np.abs(boxes[:, 2:] - truth[:, 2:]).max() < 1.5    # as at scale 1 (the drift of 40 updates)
     # a box that never moves: the round trip of the coordinate map is exact
-    still, _ = track_backward(upscale([frames[0]] * 3, 4.0), (10.0, 20.0, 12.0, 9.0), scale=4.0)
+    still, _, _ = track_backward(upscale([frames[0]] * 3, 4.0), (10.0, 20.0, 12.0, 9.0), scale=4.0)
     assert still == pytest.approx(np.tile([10.0, 20.0, 12.0, 9.0], (3, 1)), abs=1e-3)
+
+
+class ScriptedTracker:
+    """Stands in for cv2.legacy's MedianFlow: ``update`` returns the next scripted box; records every init."""
+
+    def __init__(self, script: list, inits: list):
+        self.script, self.inits = script, inits
+
+    def init(self, frame, box):
+        self.inits.append((int(frame[0, 0, 0]), tuple(box)))
+        return True
+
+    def update(self, frame):
+        return True, self.script.pop(0)
+
+
+def test_scale_gate_rejects_an_impossible_size_jump_and_restarts_the_tracker(monkeypatch):
+    """Backward from frame 5 (index 4): the tracker doubles the box at index 2 (|log scale step| = log 2 = 0.69),
+    then keeps that size. With the gate at 0.1 the jump is rejected: index 2 keeps index 3's box, the tracker
+    restarts from it on frame 2, and that frame is flagged gated, not failed. A 5 % step passes (0.05 < 0.1)."""
+    frames = [np.full((8, 8, 3), k, np.uint8) for k in range(5)]   # pixel value = frame index (seen by init)
+    last = (10.0, 10.0, 20.0, 10.0)
+    step5 = (10.0, 10.0, 21.0, 10.0)                                # sqrt(w h) x 1.0247: |log| 0.024
+    jump = (5.0, 5.0, 40.0, 20.0)                                   # sqrt(w h) x 2 from step5
+    inits: list = []
+    scripts = [[step5, jump, (5.0, 5.0, 40.0, 20.0)], [(11.0, 10.0, 21.0, 10.0), (12.0, 10.0, 21.0, 10.0)]]
+    monkeypatch.setattr(cv2.legacy, "TrackerMedianFlow_create", lambda: ScriptedTracker(scripts.pop(0), inits))
+    boxes, failed, gated = track_backward(frames, last, max_scale_step=0.1)
+    assert inits == [(4, last), (2, step5)]                         # first on the last frame, then the restart
+    assert gated.tolist() == [False, False, True, False, False] and not failed.any()
+    np.testing.assert_allclose(boxes, [(12, 10, 21, 10), (11, 10, 21, 10), step5, step5, last])
+    # without the gate the jump is taken and nothing restarts
+    inits.clear()
+    scripts = [[step5, jump, (5.0, 5.0, 40.0, 20.0), (5.0, 5.0, 40.0, 20.0)]]
+    boxes, failed, gated = track_backward(frames, last)
+    assert len(inits) == 1 and not gated.any() and not failed.any()
+    np.testing.assert_allclose(boxes[1:4], [jump, jump, step5])
 
 
 def write_clip(split: Path, n: int, frames, vehicles: list[dict]) -> None:
@@ -185,6 +222,7 @@ def test_medianflow_split_file_failures_and_bins(tmp_path):
     summary = write_medianflow(split, tmp_path / "medianflow.npz", {"n_frames": 40, "near": 20.0, "far": 45.0})
     with np.load(tmp_path / "medianflow.npz") as d:
         assert d["boxes"].shape == (3, 40, 4) and d["boxes"].dtype == np.float32 and d["failed"].shape == (3, 40)
+        assert d["gated"].shape == (3, 40) and not d["gated"].any()       # the gate is off unless configured
         assert d["clip"].tolist() == [2, 2, 10] and d["track_id"].tolist() == [5, 6, 1]
         assert d["bin"].tolist() == ["near", "far", "medium"] and d["bin_index"].tolist() == [0, 2, 1]
         np.testing.assert_allclose(d["velocity"][0], [0.5, -1.0])

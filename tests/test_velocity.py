@@ -569,7 +569,10 @@ def test_table_caption_states_the_render_and_the_epoch_kept():
     note = table_note(cfg, tcfg)
     assert "embedded clips rendered at 320 x 180 px, 1 x 1 ray per pixel" in note
     assert "the epoch with the lowest val loss kept" in note
+    assert "scale by more than e^0.1 per frame rejected" in note
     cfg["velocity_clips"]["supersample"] = 2
     cfg["velocity"]["mlp"]["select_epoch_on_val"] = False
+    cfg["detection"]["medianflow"]["max_scale_step"] = 0.0
     note = table_note(cfg, tcfg)
     assert "2 x 2 rays per pixel" in note and "lowest val loss" not in note
+    assert "MedianFlow run backward" in note and "rejected" not in note

@@ -4,6 +4,13 @@ Each annotated vehicle's last-frame box initialises OpenCV contrib's MedianFlow,
 through the clip; boxes are returned in forward time order. A failed update keeps the previous box and
 sets its `failed` flag (a failed initialisation flags every frame), so failures are visible downstream.
 
+Scale gate (`max_scale_step` > 0): an update that changes the box scale sqrt(w h) by more than a factor
+exp(max_scale_step) from one frame to the next is physically impossible for a car (the scale changes by
+v_rel / (Z fps) per frame: at most 0.05 for 20 m/s at 20 m and 20 fps) and is MedianFlow's scale estimate
+breaking down on a small box. Such an update is rejected: the box is kept, the tracker restarts from it on
+that frame, and the frame's `gated` flag is set. A gated frame is not a failed one (the target was not
+lost), so the vehicle stays a training example.
+
 Bad input is reported per clip, never a crash of the split: a missing or unreadable frame is a failed
 frame (the tracker skips it and keeps its box; a missing last frame fails the whole track, as the box
 cannot be initialised), and a clip whose annotation.json is missing or malformed is skipped. Both are
@@ -11,7 +18,7 @@ counted in the summary (`n_clips_missing_frames`, `n_clips_skipped`) and listed 
 naming the file. Only a split with no usable clip at all is an error.
 
 `medianflow.npz` per clip split (N vehicles, T frames): clip (N,) int64, track_id (N,) int64, boxes
-(N, T, 4) float32 x, y, w, h, failed (N, T) bool, velocity (N, 2) [vz, vx], position (N, 2) [z, x] (TuSimple order),
+(N, T, 4) float32 x, y, w, h, failed (N, T) bool, gated (N, T) bool, velocity (N, 2) [vz, vx], position (N, 2) [z, x] (TuSimple order),
 distance (N,) = position z, bin (N,) (by ||[z, x]||, as the TuSimple challenge script) str near / medium / far, bin_index (N,) int8 (0, 1, 2).
 """
 from __future__ import annotations
@@ -38,31 +45,39 @@ def upscale(frames: list[np.ndarray | None], scale: float) -> list[np.ndarray | 
             for f in frames]
 
 
-def track_backward(frames: list[np.ndarray | None], box_xywh, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
-    """Track a box given in the last frame backward; ((T, 4) x, y, w, h in forward order, (T,) failed).
-    A frame given as None (missing) is a failed frame: the box is kept and tracking goes on before it.
-    ``scale``: the frames were upscaled by it (``upscale``); the box is given and returned at the original
-    scale (pixel centres map as (x + 0.5) s - 0.5)."""
+def _new_tracker(frame: np.ndarray, box: tuple) -> tuple[object, bool]:
+    tracker = cv2.legacy.TrackerMedianFlow_create()
+    try:
+        return tracker, bool(tracker.init(frame, box))
+    except cv2.error:
+        return tracker, False
+
+
+def track_backward(frames: list[np.ndarray | None], box_xywh, scale: float = 1.0,
+                   max_scale_step: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Track a box given in the last frame backward; ((T, 4) x, y, w, h in forward order, (T,) failed,
+    (T,) gated). A frame given as None (missing) is a failed frame: the box is kept and tracking goes on before
+    it. ``scale``: the frames were upscaled by it (``upscale``); the box is given and returned at the original
+    scale (pixel centres map as (x + 0.5) s - 0.5). ``max_scale_step`` > 0: the scale gate (module doc)."""
     if scale != 1:
         x, y, w, h = (float(v) for v in box_xywh)
-        boxes, failed = track_backward(frames, ((x + 0.5) * scale - 0.5, (y + 0.5) * scale - 0.5, w * scale,
-                                                h * scale))
+        boxes, failed, gated = track_backward(frames, ((x + 0.5) * scale - 0.5, (y + 0.5) * scale - 0.5,
+                                                       w * scale, h * scale), max_scale_step=max_scale_step)
         boxes[:, :2] = (boxes[:, :2] + 0.5) / scale - 0.5
         boxes[:, 2:] /= scale
-        return boxes, failed
+        return boxes, failed, gated
     n = len(frames)
     boxes = np.zeros((n, 4), dtype=np.float32)
     failed = np.zeros(n, dtype=bool)
+    gated = np.zeros(n, dtype=bool)
     box = tuple(float(v) for v in box_xywh)
     boxes[:] = box
-    tracker = cv2.legacy.TrackerMedianFlow_create()
-    try:
-        ok = frames[-1] is not None and tracker.init(frames[-1], box)
-    except cv2.error:
-        ok = False
-    if ok is False:
+    ok = frames[-1] is not None
+    if ok:
+        tracker, ok = _new_tracker(frames[-1], box)
+    if not ok:
         failed[:] = True
-        return boxes, failed
+        return boxes, failed, gated
     for t in range(n - 2, -1, -1):
         if frames[t] is None:
             ok, new = False, box
@@ -72,11 +87,20 @@ def track_backward(frames: list[np.ndarray | None], box_xywh, scale: float = 1.0
             except cv2.error:
                 ok, new = False, box
         if ok and np.all(np.isfinite(new)) and new[2] > 0 and new[3] > 0:
-            box = tuple(float(v) for v in new)
+            step = 0.5 * abs(np.log(new[2] * new[3] / (box[2] * box[3])))
+            if max_scale_step > 0 and step > max_scale_step:
+                gated[t] = True
+                tracker, restarted = _new_tracker(frames[t], box)
+                if not restarted:
+                    failed[:t + 1] = True   # no tracker from here on: the rest keeps the box, as a failure
+                    boxes[:t + 1] = box
+                    return boxes, failed, gated
+            else:
+                box = tuple(float(v) for v in new)
         else:
             failed[t] = True
         boxes[t] = box
-    return boxes, failed
+    return boxes, failed, gated
 
 
 def _frame_path(clip_dir: Path, k: int) -> Path | None:
@@ -140,7 +164,8 @@ def track_split(split_dir: str | Path, medianflow_cfg: dict) -> tuple[dict, dict
     n_frames = medianflow_cfg["n_frames"]
     near, far = medianflow_cfg["near"], medianflow_cfg["far"]
     scale = float(medianflow_cfg.get("input_scale", 1.0))
-    cols = {k: [] for k in ("clip", "track_id", "boxes", "failed", "velocity", "position", "bin_index")}
+    max_scale_step = float(medianflow_cfg.get("max_scale_step", 0.0))
+    cols = {k: [] for k in ("clip", "track_id", "boxes", "failed", "gated", "velocity", "position", "bin_index")}
     dirs = clip_dirs(split_dir)
     problems: list[str] = []
     n_skipped = n_missing = 0
@@ -159,11 +184,12 @@ def track_split(split_dir: str | Path, medianflow_cfg: dict) -> tuple[dict, dict
         for k, a in enumerate(annotations):
             b = a["bbox"]
             xywh = (b["left"], b["top"], b["right"] - b["left"], b["bottom"] - b["top"])
-            boxes, failed = track_backward(frames, xywh, scale)
+            boxes, failed, gated = track_backward(frames, xywh, scale, max_scale_step)
             cols["clip"].append(int(clip_dir.name))
             cols["track_id"].append(int(a.get("track_id", k)))
             cols["boxes"].append(boxes)
             cols["failed"].append(failed)
+            cols["gated"].append(gated)
             cols["velocity"].append(a["velocity"])
             cols["position"].append(a["position"])
             cols["bin_index"].append(int(distance_bin(float(a["position"][0]), float(a["position"][1]), (near, far))))
@@ -175,9 +201,10 @@ def track_split(split_dir: str | Path, medianflow_cfg: dict) -> tuple[dict, dict
     position = np.array(cols["position"], dtype=np.float64).reshape(n, 2)
     bin_index = np.array(cols["bin_index"], dtype=np.int8)
     failed = np.array(cols["failed"], dtype=bool).reshape(n, n_frames)
+    gated = np.array(cols["gated"], dtype=bool).reshape(n, n_frames)
     arrays = {
         "clip": np.array(cols["clip"], dtype=np.int64), "track_id": np.array(cols["track_id"], dtype=np.int64),
-        "boxes": np.array(cols["boxes"], dtype=np.float32).reshape(n, n_frames, 4), "failed": failed,
+        "boxes": np.array(cols["boxes"], dtype=np.float32).reshape(n, n_frames, 4), "failed": failed, "gated": gated,
         "velocity": np.array(cols["velocity"], dtype=np.float64).reshape(n, 2), "position": position,
         "distance": position[:, 0].copy(), "bin_index": bin_index,
         "bin": np.array([BINS[i] for i in bin_index], dtype="<U6"),
@@ -185,6 +212,8 @@ def track_split(split_dir: str | Path, medianflow_cfg: dict) -> tuple[dict, dict
     summary = {"n_vehicles": n, "n_clips": len(set(cols["clip"])),
                "failed_frame_fraction": float(failed.mean()) if n else 0.0,
                "vehicles_with_failure": int(failed.any(axis=1).sum()),
+               "gated_frame_fraction": float(gated.mean()) if n else 0.0,
+               "vehicles_with_gated_frame": int(gated.any(axis=1).sum()),
                "n_clips_skipped": n_skipped, "n_clips_missing_frames": n_missing, "problems": problems}
     for i, name in enumerate(BINS):
         summary[f"n_{name}"] = int(np.count_nonzero(bin_index == i))

@@ -153,6 +153,10 @@ def table_note(config: dict, table_cfg: dict, results: dict | None = None) -> st
     if "rows" in table_cfg:
         parts.append("E_v in m^2/s^2 (TuSimple protocol, mean of the near / medium / far bins by ground-truth "
                      "distance), every annotated test vehicle scored")
+        gate = float(config.get("detection", {}).get("medianflow", {}).get("max_scale_step", 0.0))
+        parts.append("tracker boxes: MedianFlow run backward from the annotated last-frame box"
+                     + (f", an update changing the box scale by more than e^{gate:g} per frame rejected (the tracker "
+                        "restarts from the kept box)" if gate > 0 else ""))
         w = v["geometric"]["window"]
         parts.append("geometric velocity = " + ("the last-frame derivative (P_T - P_T-1) x fps" if w == 2 else
                      f"slope of the least-squares line through the last {w}") + " of the eq. (1) ground points "
