@@ -39,8 +39,9 @@ from redsup.world.clips import true_distances, write_clips  # noqa: E402
 
 
 def measure(cfg: dict, width: int, split: str, clips: int, workdir: Path, supersample: int = 1,
-            truth: bool = False, track_scales=(1.0,)) -> list[dict]:
-    """Render once, then track at each of ``track_scales`` (detection.medianflow.input_scale); one dict each."""
+            truth: bool = False, track_scales=(1.0,), trackers=({},)) -> list[dict]:
+    """Render once, then track at each of ``track_scales`` (detection.medianflow.input_scale) with each of
+    ``trackers`` (detection.medianflow.tracker: OpenCV MedianFlow parameters); one dict each."""
     ccfg = copy.deepcopy(cfg["velocity_clips"])
     ccfg["supersample"] = supersample
     base_w = ccfg["width"]
@@ -52,10 +53,11 @@ def measure(cfg: dict, width: int, split: str, clips: int, workdir: Path, supers
     write_clips(cfg["world"], ccfg, split, cfg["seed"], out)
     render_s = (time.perf_counter() - t0) / clips
     rows = []
-    for scale in track_scales:
+    for scale, tracker in ((s, t) for s in track_scales for t in trackers):
         t1 = time.perf_counter()
-        npz = out.with_name(f"{out.name}_s{scale:g}.npz")
-        write_medianflow(out, npz, {**cfg["detection"]["medianflow"], "input_scale": float(scale)})
+        npz = out.with_name(f"{out.name}_s{scale:g}_{len(rows)}.npz")
+        write_medianflow(out, npz, {**cfg["detection"]["medianflow"], "input_scale": float(scale),
+                                    "tracker": tracker})
         t2 = time.perf_counter()
         tracks = load_split(npz, out, cfg["velocity"]["min_box_px"])
         d = geometric_diagnosis(tracks, float(ccfg["fps"]))
@@ -66,7 +68,8 @@ def measure(cfg: dict, width: int, split: str, clips: int, workdir: Path, supers
                 distance[sel] = true_distances(cfg["world"], ccfg, split, cfg["seed"], int(c), tracks.track_id[sel])
             d.update(truth_diagnosis(tracks, distance, float(ccfg["fps"])))
         rows.append({**d, "render_s_per_clip": render_s, "track_s_per_clip": (t2 - t1) / clips,
-                     "vehicles": len(tracks), "failed": int(tracks.tracker_failed.sum()), "track_scale": scale})
+                     "vehicles": len(tracks), "failed": int(tracks.tracker_failed.sum()), "track_scale": scale,
+                     "tracker": ",".join(f"{k}={v}" for k, v in tracker.items()) or "defaults"})
     return rows
 
 
@@ -87,31 +90,38 @@ def main(argv=None) -> None:
     p.add_argument("--truth", action="store_true",
                    help="also the world's per-frame distances: size change to resolve, tracker error on it, and the "
                         "E_v floor of the clip's mean velocity (relative velocity changing within the clip)")
+    p.add_argument("--trackers", nargs="+", default=[""],
+                   help="detection.medianflow.tracker settings to compare on the same render, each as "
+                        "key=value,key=value (keys: redsup.prep.medianflow.TRACKER_PARAMS); '' = the config's")
     args = p.parse_args(argv)
     cfg = rconfig.load(args.config)
+    trackers = [dict((kv.split("=")[0], int(kv.split("=")[1])) for kv in t.split(",")) if t
+                else cfg["detection"]["medianflow"].get("tracker", {}) for t in args.trackers]
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for w in args.widths:
             for k in args.supersample:
-                for r in measure(cfg, w, args.split, args.clips, Path(tmp), k, args.truth, args.track_scales):
+                for r in measure(cfg, w, args.split, args.clips, Path(tmp), k, args.truth, args.track_scales,
+                                 trackers):
                     rows.append((w, k, r))
-                    print(f"{w} x {w * 9 // 16}, {k} x {k} rays per pixel, tracked at x{r['track_scale']:g}: "
+                    print(f"{w} x {w * 9 // 16}, {k} x {k} rays per pixel, tracked at x{r['track_scale']:g} "
+                          f"({r['tracker']}): "
                           f"{r['vehicles']} vehicles ({r['failed']} tracker failures), render "
                           f"{r['render_s_per_clip']:.2f} s / clip, tracking {r['track_s_per_clip']:.2f} s / clip",
                           flush=True)
     print(f"\n{args.split} split, first {args.clips} clips; per bin near / medium / far\n")
-    print("| width | rays per pixel | tracker input scale | vehicles | last tracked box (px, median) "
+    print("| width | rays per pixel | tracker input scale | MedianFlow | vehicles | last tracked box (px, median) "
           "| corr(size-change v_z, true v_z) | box bottom motion over the clip (px, median) |")
-    print("|---:|---:|---:|---:|---|---|---|")
+    print("|---:|---:|---:|---|---:|---|---|---|")
     for w, k, r in rows:
-        print(f"| {w} | {k} x {k} | {r['track_scale']:g} | {r['vehicles']} | {per_bin(r, 'box_px', '.1f')} | "
+        print(f"| {w} | {k} x {k} | {r['track_scale']:g} | {r['tracker']} | {r['vehicles']} | {per_bin(r, 'box_px', '.1f')} | "
               f"{per_bin(r, 'scale_corr', '.2f')} | {per_bin(r, 'motion_px', '.2f')} |")
     if args.truth:
-        print("\n| width | rays per pixel | tracker input scale | std of the true size ratio s_(T-1) / s_1 "
+        print("\n| width | rays per pixel | tracker input scale | MedianFlow | std of the true size ratio s_(T-1) / s_1 "
               "| std of the tracker's error on it | E_v floor of the clip-mean v_z (m^2/s^2) |")
-        print("|---:|---:|---:|---|---|---|")
+        print("|---:|---:|---:|---|---|---|---|")
         for w, k, r in rows:
-            print(f"| {w} | {k} x {k} | {r['track_scale']:g} | {per_bin(r, 'ratio_signal', '.3f')} | {per_bin(r, 'ratio_noise', '.3f')} | "
+            print(f"| {w} | {k} x {k} | {r['track_scale']:g} | {r['tracker']} | {per_bin(r, 'ratio_signal', '.3f')} | {per_bin(r, 'ratio_noise', '.3f')} | "
                   f"{per_bin(r, 'accel_floor', '.2f')} |")
 
 

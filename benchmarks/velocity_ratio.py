@@ -3,6 +3,7 @@ bin-stratified bootstrap over the vehicles (`redsup.velocity.compare`).
 
     python benchmarks/velocity_ratio.py results/velocity [--split test val] [--a mlp_tracker] [--b constant]
         [--clips FIRST STOP]      # only the vehicles of clips FIRST <= clip < STOP
+        [--b-dir OTHER/velocity]  # the reference from another build (a variant against the baseline, paired)
 """
 from __future__ import annotations
 
@@ -21,6 +22,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--split", nargs="+", default=["test", "val"])
     ap.add_argument("--a", default="mlp_tracker", help="the configuration of the method (numerator)")
     ap.add_argument("--b", default="constant", help="the configuration of the reference (denominator)")
+    ap.add_argument("--b-dir", help="the reference's results/velocity when it comes from another build "
+                                    "(default: velocity_dir); the vehicles are paired by clip and track id")
     ap.add_argument("--n", type=int, default=2000, help="bootstrap replicates")
     ap.add_argument("--clips", nargs=2, type=int, metavar=("FIRST", "STOP"),
                     help="only the vehicles of clips FIRST <= clip < STOP (e.g. the clips an enlarged split gained)")
@@ -28,7 +31,7 @@ def main(argv: list[str] | None = None) -> int:
     for split in args.split:
         try:
             a = per_vehicle_errors(args.velocity_dir, args.a, split)
-            b = per_vehicle_errors(args.velocity_dir, args.b, split)
+            b = per_vehicle_errors(args.b_dir or args.velocity_dir, args.b, split)
         except FileNotFoundError as exc:
             print(f"{split}: {exc}")
             continue

@@ -506,3 +506,17 @@ def test_bev_image_puts_points_and_boxes_where_the_grid_says():
     faded = bev_image(np.zeros((0, 3)), np.zeros((0, 7)), box, np.array([0.15]), grid, "t")[36:]
     strong = bev_image(np.zeros((0, 3)), np.zeros((0, 7)), box, np.array([1.0]), grid, "t")[36:]
     assert strong[40, 80:121].sum() < faded[40, 80:121].sum()        # a low score draws paler
+
+
+def test_values_at_cells_by_hand_and_a_contiguous_gradient():
+    """_at_cells reads (N, C) from channel-first maps at (frame, row, col); a cell met twice gets both
+    gradients; the gradient of the maps is contiguous (no channel-last copy in the backward)."""
+    maps = torch.arange(2 * 3 * 2 * 4, dtype=torch.float32).reshape(2, 3, 2, 4).requires_grad_()
+    frame, cells = torch.tensor([1, 0, 1]), torch.tensor([[0, 2], [1, 3], [0, 2]])
+    got = C._at_cells(maps, frame, cells)
+    # maps[f, c, r, k] = 24 f + 8 c + 4 r + k
+    assert got.tolist() == [[26, 34, 42], [7, 15, 23], [26, 34, 42]]
+    (grad,) = torch.autograd.grad((got * torch.tensor([[1.0], [2.0], [3.0]])).sum(), maps)
+    assert grad.is_contiguous()
+    assert grad[1, :, 0, 2].tolist() == [4.0, 4.0, 4.0] and grad[0, :, 1, 3].tolist() == [2.0, 2.0, 2.0]
+    assert grad.sum().item() == 3 * (1 + 2 + 3)

@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 from redsup.prep import masks_io
-from redsup.prep.medianflow import track_backward, upscale, write_medianflow
+from redsup.prep.medianflow import _new_tracker, track_backward, tracker_settings, upscale, write_medianflow
 from redsup.prep.tracks3d import COLUMNS, link_frames, write_tracks3d
 from redsup.sceneio import SceneError
 
@@ -196,6 +196,42 @@ def test_scale_gate_rejects_an_impossible_size_jump_and_restarts_the_tracker(mon
     boxes, failed, gated = track_backward(frames, last)
     assert len(inits) == 1 and not gated.any() and not failed.any()
     np.testing.assert_allclose(boxes[1:4], [jump, jump, step5])
+
+
+def opencv_params(tracker) -> dict:
+    fs = cv2.FileStorage("params.yaml", cv2.FILE_STORAGE_WRITE | cv2.FILE_STORAGE_MEMORY)
+    tracker.write(fs)
+    reader = cv2.FileStorage(fs.releaseAndGetString(), cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
+    nodes = {k: reader.getNode(k) for k in ("pointsInGrid", "winSize", "maxLevel", "winSizeNCC")}
+    return {k: [n.at(i).real() for i in range(n.size())] if n.isSeq() else n.real() for k, n in nodes.items()}
+
+
+def test_tracker_settings_reach_opencv_and_unset_keys_keep_its_defaults():
+    frame = np.random.default_rng(0).integers(0, 255, (60, 80, 3)).astype(np.uint8)
+    defaults = {"pointsInGrid": 10, "winSize": [3, 3], "maxLevel": 5, "winSizeNCC": [30, 30]}
+    assert tracker_settings(None) is None and tracker_settings({}) is None
+    assert opencv_params(_new_tracker(frame, (20, 20, 12, 9))[0]) == defaults
+    tracker, ok = _new_tracker(frame, (20, 20, 12, 9), tracker_settings({"win_size_ncc": 7, "max_level": 2}))
+    assert ok and opencv_params(tracker) == {**defaults, "winSizeNCC": [7, 7], "maxLevel": 2}
+    with pytest.raises(ValueError, match="winsize"):
+        tracker_settings({"winsize": 5})
+
+
+def test_track_split_passes_the_configured_tracker_settings(tmp_path, monkeypatch):
+    seen = []
+    real = _new_tracker
+
+    def spy(frame, box, settings=None):
+        seen.append(settings)
+        return real(frame, box, settings)
+
+    monkeypatch.setattr("redsup.prep.medianflow._new_tracker", spy)
+    frames, truth = render_clip(n=5)
+    write_clip(tmp_path / "val", 1, frames, [vehicle(truth[-1], 30.0, 0)])
+    cfg = {"n_frames": 5, "near": 20.0, "far": 45.0, "tracker": {"win_size_ncc": 7}}
+    write_medianflow(tmp_path / "val", tmp_path / "mf.npz", cfg)
+    assert seen == [tracker_settings({"win_size_ncc": 7})]
+    assert "winSizeNCC: [ 7, 7 ]" in seen[0]
 
 
 def write_clip(split: Path, n: int, frames, vehicles: list[dict]) -> None:

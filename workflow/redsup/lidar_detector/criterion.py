@@ -44,8 +44,11 @@ def focal_heatmap_loss(logits: torch.Tensor, target: torch.Tensor, alpha: float 
 
 
 def _at_cells(maps: torch.Tensor, frame: torch.Tensor, cells: torch.Tensor) -> torch.Tensor:
-    """(N, C) values of channel-first maps (B, C, H, W) at (frame, row, col)."""
-    return maps.permute(0, 2, 3, 1)[frame, cells[:, 0], cells[:, 1]]
+    """(N, C) values of channel-first maps (B, C, H, W) at (frame, row, col). Indexed in place, not through a
+    channel-last view: the gradient stays contiguous (a permuted one costs a full copy of every map per step in
+    the backward, 9 % of a default training step with the 64-bin yaw map; the values and the maps' gradients are
+    the same, but the convolution backward then rounds differently: trainings differ at float precision)."""
+    return maps[frame, :, cells[:, 0], cells[:, 1]]
 
 
 def weak_alignment(outputs: dict[str, torch.Tensor], grid: BevGrid, assign: WeakAssignment, objs: WeakObjects,

@@ -45,8 +45,33 @@ def upscale(frames: list[np.ndarray | None], scale: float) -> list[np.ndarray | 
             for f in frames]
 
 
-def _new_tracker(frame: np.ndarray, box: tuple) -> tuple[object, bool]:
+#: OpenCV's MedianFlow parameters that `detection.medianflow.tracker` may set (config name -> OpenCV name);
+#: OpenCV's defaults: a 10 x 10 point grid, 3 x 3 Lucas-Kanade windows on 5 pyramid levels, 30 x 30 NCC patches.
+TRACKER_PARAMS = {"points_in_grid": "pointsInGrid", "win_size": "winSize", "max_level": "maxLevel",
+                  "win_size_ncc": "winSizeNCC"}
+
+
+def tracker_settings(params: dict | None) -> str | None:
+    """The FileStorage YAML that sets OpenCV MedianFlow parameters (the Python binding has no Params class;
+    ``tracker.read`` takes them from a file node), None for OpenCV's defaults. Window sizes are square (one
+    integer)."""
+    if not params:
+        return None
+    lines = ["%YAML:1.0", "---"]
+    for key, value in (params or {}).items():
+        if key not in TRACKER_PARAMS:
+            raise ValueError(f"unknown MedianFlow parameter {key!r}; known: {sorted(TRACKER_PARAMS)}")
+        value = int(value)
+        lines.append(f"{TRACKER_PARAMS[key]}: " + (f"[ {value}, {value} ]" if key.startswith("win_size") else str(value)))
+    return "\n".join(lines) + "\n"
+
+
+def _new_tracker(frame: np.ndarray, box: tuple, settings: str | None = None) -> tuple[object, bool]:
     tracker = cv2.legacy.TrackerMedianFlow_create()
+    if settings:
+        fs = cv2.FileStorage(settings, cv2.FILE_STORAGE_READ | cv2.FILE_STORAGE_MEMORY)
+        tracker.read(fs.root())
+        fs.release()
     try:
         return tracker, bool(tracker.init(frame, box))
     except cv2.error:
@@ -54,7 +79,8 @@ def _new_tracker(frame: np.ndarray, box: tuple) -> tuple[object, bool]:
 
 
 def track_backward(frames: list[np.ndarray | None], box_xywh, scale: float = 1.0,
-                   max_scale_step: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                   max_scale_step: float = 0.0, settings: str | None = None
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Track a box given in the last frame backward; ((T, 4) x, y, w, h in forward order, (T,) failed,
     (T,) gated). A frame given as None (missing) is a failed frame: the box is kept and tracking goes on before
     it. ``scale``: the frames were upscaled by it (``upscale``); the box is given and returned at the original
@@ -62,7 +88,8 @@ def track_backward(frames: list[np.ndarray | None], box_xywh, scale: float = 1.0
     if scale != 1:
         x, y, w, h = (float(v) for v in box_xywh)
         boxes, failed, gated = track_backward(frames, ((x + 0.5) * scale - 0.5, (y + 0.5) * scale - 0.5,
-                                                       w * scale, h * scale), max_scale_step=max_scale_step)
+                                                       w * scale, h * scale), max_scale_step=max_scale_step,
+                                             settings=settings)
         boxes[:, :2] = (boxes[:, :2] + 0.5) / scale - 0.5
         boxes[:, 2:] /= scale
         return boxes, failed, gated
@@ -74,7 +101,7 @@ def track_backward(frames: list[np.ndarray | None], box_xywh, scale: float = 1.0
     boxes[:] = box
     ok = frames[-1] is not None
     if ok:
-        tracker, ok = _new_tracker(frames[-1], box)
+        tracker, ok = _new_tracker(frames[-1], box, settings)
     if not ok:
         failed[:] = True
         return boxes, failed, gated
@@ -90,7 +117,7 @@ def track_backward(frames: list[np.ndarray | None], box_xywh, scale: float = 1.0
             step = 0.5 * abs(np.log(new[2] * new[3] / (box[2] * box[3])))
             if max_scale_step > 0 and step > max_scale_step:
                 gated[t] = True
-                tracker, restarted = _new_tracker(frames[t], box)
+                tracker, restarted = _new_tracker(frames[t], box, settings)
                 if not restarted:
                     failed[:t + 1] = True   # no tracker from here on: the rest keeps the box, as a failure
                     boxes[:t + 1] = box
@@ -165,6 +192,7 @@ def track_split(split_dir: str | Path, medianflow_cfg: dict) -> tuple[dict, dict
     near, far = medianflow_cfg["near"], medianflow_cfg["far"]
     scale = float(medianflow_cfg.get("input_scale", 1.0))
     max_scale_step = float(medianflow_cfg.get("max_scale_step", 0.0))
+    settings = tracker_settings(medianflow_cfg.get("tracker"))
     cols = {k: [] for k in ("clip", "track_id", "boxes", "failed", "gated", "velocity", "position", "bin_index")}
     dirs = clip_dirs(split_dir)
     problems: list[str] = []
@@ -184,7 +212,7 @@ def track_split(split_dir: str | Path, medianflow_cfg: dict) -> tuple[dict, dict
         for k, a in enumerate(annotations):
             b = a["bbox"]
             xywh = (b["left"], b["top"], b["right"] - b["left"], b["bottom"] - b["top"])
-            boxes, failed, gated = track_backward(frames, xywh, scale, max_scale_step)
+            boxes, failed, gated = track_backward(frames, xywh, scale, max_scale_step, settings)
             cols["clip"].append(int(clip_dir.name))
             cols["track_id"].append(int(a.get("track_id", k)))
             cols["boxes"].append(boxes)
