@@ -58,7 +58,7 @@ def tracker_settings(params: dict | None) -> str | None:
     if not params:
         return None
     lines = ["%YAML:1.0", "---"]
-    for key, value in (params or {}).items():
+    for key, value in params.items():
         if key not in TRACKER_PARAMS:
             raise ValueError(f"unknown MedianFlow parameter {key!r}; known: {sorted(TRACKER_PARAMS)}")
         value = int(value)
