@@ -95,7 +95,7 @@ def main(argv=None) -> None:
                         "key=value,key=value (keys: redsup.prep.medianflow.TRACKER_PARAMS); '' = the config's")
     args = p.parse_args(argv)
     cfg = rconfig.load(args.config)
-    trackers = [dict((kv.split("=")[0], int(kv.split("=")[1])) for kv in t.split(",")) if t
+    trackers = [{k: int(v) for k, _, v in (kv.partition("=") for kv in t.split(","))} if t
                 else cfg["detection"]["medianflow"].get("tracker", {}) for t in args.trackers]
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
