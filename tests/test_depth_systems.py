@@ -130,18 +130,21 @@ def test_train_settings_override_per_system():
 
 
 def test_train_settings_mode_recipe_between_base_and_model_entry():
-    """A mode's input_scale / steps override depth.model / depth.train; a models entry's steps override the mode's."""
+    """A mode's input_scale / steps / lr override depth.model / depth.train; a models entry's steps override the
+    mode's."""
     cfg = {"model": {"base_channels": 16, "num_scales": 4, "min_depth": 0.1, "max_depth": 100.0},
            "train": {"steps": 600, "batch_size": 4, "lr": 1e-4, "decay_at": 0.75, "gamma": 0.1},
-           "modes": {"M": {"sources": ["prev", "next"], "cameras": ["cam_front"], "input_scale": 0.5, "steps": 2400},
+           "modes": {"M": {"sources": ["prev", "next"], "cameras": ["cam_front"], "input_scale": 0.5, "steps": 2400,
+                           "lr": 3e-4},
                      "S": {"sources": ["stereo"], "cameras": ["cam_front"]}},
            "models": [{"dataset": "a", "mode": "M"}, {"dataset": "b", "mode": "M", "steps": 30},
                       {"dataset": "a", "mode": "S"}]}
     model, train = train_settings(cfg, "a", "M")
-    assert model["input_scale"] == 0.5 and train["steps"] == 2400
+    assert model["input_scale"] == 0.5 and train["steps"] == 2400 and train["lr"] == 3e-4
+    assert train["decay_at"] == 0.75 and train["batch_size"] == 4
     assert train_settings(cfg, "b", "M")[1]["steps"] == 30
     model, train = train_settings(cfg, "a", "S")
-    assert model.get("input_scale", 1.0) == 1.0 and train["steps"] == 600
+    assert model.get("input_scale", 1.0) == 1.0 and train["steps"] == 600 and train["lr"] == 1e-4
 
 
 def test_a_mode_may_select_its_best_validation_pass():
