@@ -13,6 +13,8 @@ configfile: os.path.join(workflow.basedir, "config.yaml")
 # Every job's script imports redsup from this checkout, whatever interpreter runs it (a conda env from envs/ installs
 # no project, so it has no path that breaks in Snakemake's copy .snakemake/conda/<hash>.yaml).
 redsup.jobenv.put_on_pythonpath(os.path.join(workflow.basedir, "workflow"))
+# Jobs keep freed memory for their next training step instead of faulting it in again (redsup.jobenv).
+redsup.jobenv.keep_freed_memory()
 
 
 include: "workflow/rules/common.smk"

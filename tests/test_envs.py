@@ -6,6 +6,7 @@ from __future__ import annotations
 import ast
 import hashlib
 import os
+import platform
 import re
 import shutil
 import subprocess
@@ -182,6 +183,33 @@ def test_redsup_comes_from_pythonpath_in_a_bare_interpreter(tmp_path):
     assert bare.returncode != 0  # without it, a bare interpreter has no redsup: the variable is what makes it work
     assert 'redsup.jobenv.put_on_pythonpath(os.path.join(workflow.basedir, "workflow"))' in \
         (ROOT / "Snakefile").read_text()
+
+
+_FAULTS = """
+import resource
+before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+for _ in range(20):
+    block = bytearray(40 << 20)             # above glibc's largest dynamic mmap threshold (32 MiB)
+    block[::4096] = bytes(len(block) // 4096)  # touch every page
+    del block
+print(resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before)
+"""
+
+
+@pytest.mark.skipif(platform.libc_ver()[0] != "glibc", reason="glibc's allocator variables")
+def test_jobs_keep_freed_memory_instead_of_faulting_it_in_again():
+    """A job that frees and reallocates a large block every step (a training step's activations) faults its pages in
+    once with the Snakefile's allocator variables, and on every step without them."""
+    base = {k: v for k, v in os.environ.items() if not k.startswith("MALLOC_")}
+    tuned = dict(base)
+    assert jobenv.keep_freed_memory(tuned) == jobenv.ALLOCATOR_ENV
+    faults = [int(subprocess.run([sys.executable, "-c", _FAULTS], env=env, capture_output=True, text=True,
+                                 check=True).stdout) for env in (base, tuned)]
+    pages = (40 << 20) // 4096
+    assert faults[0] > 15 * pages and faults[1] < 3 * pages, faults
+    mine = {**base, "MALLOC_TRIM_THRESHOLD_": "0"}
+    assert jobenv.keep_freed_memory(mine)["MALLOC_TRIM_THRESHOLD_"] == "0"  # a user's own setting stays
+    assert "redsup.jobenv.keep_freed_memory()" in (ROOT / "Snakefile").read_text()
 
 
 def test_slurm_profile_and_cluster_extra():
