@@ -3,6 +3,7 @@
 import os
 
 import redsup.jobenv
+import redsup.scheduler_timers
 from snakemake.utils import min_version
 
 min_version("9.0")
@@ -15,6 +16,8 @@ configfile: os.path.join(workflow.basedir, "config.yaml")
 redsup.jobenv.put_on_pythonpath(os.path.join(workflow.basedir, "workflow"))
 # Jobs keep freed memory for their next training step instead of faulting it in again (redsup.jobenv).
 redsup.jobenv.keep_freed_memory()
+# One pending re-evaluation timer in Snakemake's scheduler, not one per job event (redsup.scheduler_timers).
+redsup.scheduler_timers.collapse_reevaluation_timers()
 
 
 include: "workflow/rules/common.smk"
