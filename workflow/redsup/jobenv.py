@@ -7,7 +7,7 @@ cluster too (the SLURM plugin exports the submitting environment).
 
 ``keep_freed_memory`` tells glibc's allocator to keep freed memory in the process: torch frees and reallocates its
 activations every training step, and with glibc's defaults each 0.6-3 MB tensor is a fresh ``mmap`` whose pages
-fault in again (about 5,500 page faults a step for M at 208 x 64), which costs system time
+fault in again (5,500-8,000 page faults a step for M at 208 x 64), which costs system time
 (``benchmarks/bench_allocator.py``).
 """
 from __future__ import annotations

@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import threading
 
+_LOCK = threading.Lock()  # guards each scheduler's pending flag between the loop and its timer
+
 
 def collapse_reevaluation_timers(scheduler_cls=None) -> bool:
     """Patch ``scheduler_cls`` (default Snakemake's ``JobScheduler``); returns whether it was patched."""
@@ -49,5 +51,3 @@ def collapse_reevaluation_timers(scheduler_cls=None) -> bool:
     scheduler_cls._schedule_reevalutation = _schedule_reevalutation
     return True
 
-
-_LOCK = threading.Lock()
