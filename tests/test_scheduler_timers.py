@@ -35,7 +35,7 @@ rule all:
 
 rule quick:
     output: "q/{{i}}.txt"
-    shell: "sleep 0.1; touch {{output}}"
+    shell: "sleep 0.3; touch {{output}}"
 """
 
 
@@ -55,7 +55,7 @@ def _passes_and_timers(tmp_path: Path, patch: bool) -> tuple[int, int]:
 
 
 def test_one_pending_reevaluation_timer_instead_of_one_per_job(tmp_path):
-    """60 jobs of 0.1 s on 2 cores: the stock scheduler ends with a timer chain per job event alive (each waking it
+    """60 jobs of 0.3 s on 2 cores: the stock scheduler ends with a timer chain per job event alive (each waking it
     every second) and makes several passes per job; with the patch at most one timer is pending at a pass, about
     one pass a job is left, and every job still runs."""
     stock = _passes_and_timers(tmp_path, patch=False)
