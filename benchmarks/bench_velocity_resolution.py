@@ -15,6 +15,12 @@ velocity costs when the relative velocity changes within the clip (``truth_diagn
     python benchmarks/bench_velocity_resolution.py                          # 20 test clips, 320 / 640 / 1280
     python benchmarks/bench_velocity_resolution.py --clips 40 --widths 320 --supersample 1 2 --split val
     python benchmarks/bench_velocity_resolution.py --clips 40 --widths 320 640 --split val --truth
+    python benchmarks/bench_velocity_resolution.py --clips 20 --widths 1280 --split val --truth \
+        --foveate 1:0 4:48 --image-format png jpg      # foveated rendering (redsup.world.foveate), JPEG frames
+
+``--foveate F:M`` renders the cars' windows (grown by M px) at full resolution and the rest on an F-times coarser
+grid (``velocity_clips.foveate``; 1:0 = every pixel cast); render seconds are then also given as the rendering
+process's CPU seconds (``render_cpu_s``), which another job on the machine disturbs less than the wall time.
 """
 from __future__ import annotations
 
@@ -39,19 +45,22 @@ from redsup.world.clips import true_distances, write_clips  # noqa: E402
 
 
 def measure(cfg: dict, width: int, split: str, clips: int, workdir: Path, supersample: int = 1,
-            truth: bool = False, track_scales=(1.0,), trackers=({},)) -> list[dict]:
+            truth: bool = False, track_scales=(1.0,), trackers=({},), foveate=(1, 0),
+            image_format: str = "png") -> list[dict]:
     """Render once, then track at each of ``track_scales`` (detection.medianflow.input_scale) with each of
     ``trackers`` (detection.medianflow.tracker: OpenCV MedianFlow parameters); one dict each."""
     ccfg = copy.deepcopy(cfg["velocity_clips"])
     ccfg["supersample"] = supersample
+    ccfg["foveate"] = {"factor": int(foveate[0]), "margin_px": int(foveate[1])}
+    ccfg["image_format"] = image_format
     base_w = ccfg["width"]
     ccfg["width"], ccfg["height"] = width, width * 9 // 16
     ccfg["min_visible_px"] = int(round(ccfg["min_visible_px"] * (width / base_w) ** 2))
     ccfg["splits"] = {split: {**ccfg["splits"][split], "clips": clips}}
-    out = workdir / f"w{width}_k{supersample}"
-    t0 = time.perf_counter()
+    out = workdir / f"w{width}_k{supersample}_f{foveate[0]}m{foveate[1]}_{image_format}"
+    t0, c0 = time.perf_counter(), time.process_time()
     write_clips(cfg["world"], ccfg, split, cfg["seed"], out)
-    render_s = (time.perf_counter() - t0) / clips
+    render_s, render_cpu = (time.perf_counter() - t0) / clips, (time.process_time() - c0) / clips
     rows = []
     for scale, tracker in ((s, t) for s in track_scales for t in trackers):
         t1 = time.perf_counter()
@@ -67,7 +76,9 @@ def measure(cfg: dict, width: int, split: str, clips: int, workdir: Path, supers
                 sel = np.nonzero(tracks.clip == c)[0]
                 distance[sel] = true_distances(cfg["world"], ccfg, split, cfg["seed"], int(c), tracks.track_id[sel])
             d.update(truth_diagnosis(tracks, distance, float(ccfg["fps"])))
-        rows.append({**d, "render_s_per_clip": render_s, "track_s_per_clip": (t2 - t1) / clips,
+        rows.append({**d, "render_s_per_clip": render_s, "render_cpu_s_per_clip": render_cpu,
+                     "track_s_per_clip": (t2 - t1) / clips, "foveate": f"{foveate[0]}:{foveate[1]}",
+                     "image_format": image_format,
                      "vehicles": len(tracks), "failed": int(tracks.tracker_failed.sum()), "track_scale": scale,
                      "tracker": ",".join(f"{k}={v}" for k, v in tracker.items()) or "defaults"})
     return rows
@@ -93,35 +104,43 @@ def main(argv=None) -> None:
     p.add_argument("--trackers", nargs="+", default=[""],
                    help="detection.medianflow.tracker settings to compare on the same render, each as "
                         "key=value,key=value (keys: redsup.prep.medianflow.TRACKER_PARAMS); '' = the config's")
+    p.add_argument("--foveate", nargs="+", default=["1:0"],
+                   help="velocity_clips.foveate factor:margin_px values, each rendered (1:0 = every pixel cast)")
+    p.add_argument("--image-format", nargs="+", default=["png"], choices=["png", "jpg"],
+                   help="frame files (jpg at velocity_clips.jpeg_quality)")
     args = p.parse_args(argv)
+    foveates = [tuple(int(v) for v in f.split(":")) for f in args.foveate]
     cfg = rconfig.load(args.config)
     trackers = [{k: int(v) for k, _, v in (kv.partition("=") for kv in t.split(","))} if t
                 else cfg["detection"]["medianflow"].get("tracker", {}) for t in args.trackers]
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        for w in args.widths:
-            for k in args.supersample:
-                for r in measure(cfg, w, args.split, args.clips, Path(tmp), k, args.truth, args.track_scales,
-                                 trackers):
-                    rows.append((w, k, r))
-                    print(f"{w} x {w * 9 // 16}, {k} x {k} rays per pixel, tracked at x{r['track_scale']:g} "
-                          f"({r['tracker']}): "
-                          f"{r['vehicles']} vehicles ({r['failed']} tracker failures), render "
-                          f"{r['render_s_per_clip']:.2f} s / clip, tracking {r['track_s_per_clip']:.2f} s / clip",
-                          flush=True)
+        for w, k, fov, fmt in ((w, k, f, m) for w in args.widths for k in args.supersample for f in foveates
+                               for m in args.image_format):
+            for r in measure(cfg, w, args.split, args.clips, Path(tmp), k, args.truth, args.track_scales,
+                             trackers, fov, fmt):
+                rows.append((w, k, r))
+                print(f"{w} x {w * 9 // 16}, {k} x {k} rays per pixel, foveate {r['foveate']}, {fmt}, tracked at "
+                      f"x{r['track_scale']:g} ({r['tracker']}): "
+                      f"{r['vehicles']} vehicles ({r['failed']} tracker failures), render "
+                      f"{r['render_s_per_clip']:.2f} s / clip ({r['render_cpu_s_per_clip']:.2f} CPU-s), tracking "
+                      f"{r['track_s_per_clip']:.2f} s / clip", flush=True)
     print(f"\n{args.split} split, first {args.clips} clips; per bin near / medium / far\n")
-    print("| width | rays per pixel | tracker input scale | MedianFlow | vehicles | last tracked box (px, median) "
-          "| corr(size-change v_z, true v_z) | box bottom motion over the clip (px, median) |")
-    print("|---:|---:|---:|---|---:|---|---|---|")
+    print("| width | rays per pixel | foveate | frames | render CPU-s / clip | tracker input scale | MedianFlow | "
+          "vehicles | last tracked box (px, median) | corr(size-change v_z, true v_z) | box bottom motion over the "
+          "clip (px, median) |")
+    print("|---:|---:|---|---|---:|---:|---|---:|---|---|---|")
     for w, k, r in rows:
-        print(f"| {w} | {k} x {k} | {r['track_scale']:g} | {r['tracker']} | {r['vehicles']} | {per_bin(r, 'box_px', '.1f')} | "
+        print(f"| {w} | {k} x {k} | {r['foveate']} | {r['image_format']} | {r['render_cpu_s_per_clip']:.2f} | "
+              f"{r['track_scale']:g} | {r['tracker']} | {r['vehicles']} | {per_bin(r, 'box_px', '.1f')} | "
               f"{per_bin(r, 'scale_corr', '.2f')} | {per_bin(r, 'motion_px', '.2f')} |")
     if args.truth:
-        print("\n| width | rays per pixel | tracker input scale | MedianFlow | std of the true size ratio s_(T-1) / s_1 "
-              "| std of the tracker's error on it | E_v floor of the clip-mean v_z (m^2/s^2) |")
-        print("|---:|---:|---:|---|---|---|---|")
+        print("\n| width | rays per pixel | foveate | frames | tracker input scale | MedianFlow | std of the true size "
+              "ratio s_(T-1) / s_1 | std of the tracker's error on it | E_v floor of the clip-mean v_z (m^2/s^2) |")
+        print("|---:|---:|---|---|---:|---|---|---|---|")
         for w, k, r in rows:
-            print(f"| {w} | {k} x {k} | {r['track_scale']:g} | {r['tracker']} | {per_bin(r, 'ratio_signal', '.3f')} | {per_bin(r, 'ratio_noise', '.3f')} | "
+            print(f"| {w} | {k} x {k} | {r['foveate']} | {r['image_format']} | {r['track_scale']:g} | {r['tracker']} | "
+                  f"{per_bin(r, 'ratio_signal', '.3f')} | {per_bin(r, 'ratio_noise', '.3f')} | "
                   f"{per_bin(r, 'accel_floor', '.2f')} |")
 
 

@@ -357,8 +357,8 @@ def test_clips_have_40_frames_and_pinhole_consistent_annotations(cfg, tmp_path):
     assert height == clips["camera_height"] and fx == pytest.approx(fy)
     n_ann = 0
     for k in range(1, 4):
-        frames = sorted((root / "clips" / str(k) / "imgs").glob("*.png"))
-        assert [p.name for p in frames] == [f"{i:03d}.png" for i in range(1, 41)]
+        frames = sorted((root / "clips" / str(k) / "imgs").glob("*.jpg"))      # the tiny profile's: foveated JPEG
+        assert [p.name for p in frames] == [f"{i:03d}.jpg" for i in range(1, 41)]
         assert cv2.imread(str(frames[0])).shape == (180, 320, 3)
         for ann in json.loads((root / "clips" / str(k) / "annotation.json").read_text()):
             n_ann += 1
@@ -402,7 +402,8 @@ def test_supersampled_clip_pixels_integrate_their_area(cfg, tmp_path):
     annotated boxes lie on the half-pixel grid (sub-pixel), still consistent with eq. (1)."""
     world = copy.deepcopy(cfg["world"])
     clips = copy.deepcopy(cfg["velocity_clips"])
-    clips.update(width=160, height=90, frames=2, supersample=2)
+    clips.update(width=160, height=90, frames=2, supersample=2, foveate={"factor": 1, "margin_px": 0},
+                 image_format="png")
     clips["splits"]["train"] = {"clips": 2, "velocity_scale": 1.0}
     write_clips(world, clips, "train", 5, tmp_path / "ss")
     plain = dict(clips, supersample=1)
@@ -493,3 +494,24 @@ def test_clips_render_the_same_files_in_parallel(cfg, tmp_path):
     assert sorted(p.relative_to(tmp_path / "two") for p in (tmp_path / "two").rglob("*") if p.is_file()) == files
     assert {k: one[k] for k in ("annotated", "near", "medium", "far")} == \
         {k: two[k] for k in ("annotated", "near", "medium", "far")} and two["workers"] == 2
+
+
+def test_finish_is_the_written_out_domain_look():
+    """shade.finish (in place) against the look written out step by step: bit-identical, with gamma and noise."""
+    from redsup.world.shade import finish
+
+    look = {"brightness": 1.1, "tint": [1.0, 0.95, 0.9], "saturation": 0.8, "contrast": 1.2, "gamma": 1.3}
+    col = derive_rng(4).random((500, 3), dtype=np.float32)
+    ref = col * (np.float32(1.1) * np.asarray(look["tint"], np.float32))
+    lum = np.einsum("ni,i->n", ref, np.array([0.299, 0.587, 0.114], np.float32))
+    ref = lum[:, None] + (ref - lum[:, None]) * np.float32(0.8)
+    ref = np.clip((ref - np.float32(0.45)) * np.float32(1.2) + np.float32(0.45), 0.0, 1.0) ** np.float32(1 / 1.3)
+    ref = ref + np.float32(0.03) * derive_rng(5).standard_normal(ref.shape, dtype=np.float32)
+    ref = np.clip(np.round(ref * 255.0), 0, 255).astype(np.uint8)
+    before = col.copy()
+    assert np.array_equal(finish(col, look, 0.03, derive_rng(5)), ref)
+    assert np.array_equal(col, before)                   # the input is not modified
+    # a hand case: grey 0.5, identity look, no noise -> round(127.5) = 128 (half to even)
+    grey = np.full((1, 3), 0.5, np.float32)
+    ident = {"brightness": 1.0, "tint": [1.0, 1.0, 1.0], "saturation": 1.0, "contrast": 1.0, "gamma": 1.0}
+    assert finish(grey, ident, 0.0, derive_rng(1)).tolist() == [[128, 128, 128]]

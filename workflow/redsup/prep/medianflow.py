@@ -162,7 +162,7 @@ def read_frames(clip_dir: str | Path, n_frames: int) -> tuple[list[np.ndarray | 
         path = _frame_path(clip_dir, k)
         image = None if path is None else cv2.imread(str(path), cv2.IMREAD_COLOR)
         if path is None:
-            problems.append(f"{clip_dir / 'imgs'}: frame {k:03d}.png missing (a clip has {n_frames} frames)")
+            problems.append(f"{clip_dir / 'imgs'}: frame {k:03d}.png missing (nor .jpg; a clip has {n_frames} frames)")
         elif image is None:
             problems.append(f"{path}: unreadable image")
         frames.append(image)

@@ -148,8 +148,13 @@ def table_note(config: dict, table_cfg: dict, results: dict | None = None) -> st
     clips = config.get("velocity_clips", {})
     if "rows" in table_cfg and "width" in clips and not clips.get("source"):
         k = int(clips.get("supersample", 1))
+        fov = clips.get("foveate") or {"factor": 1}
         parts.append(f"embedded clips rendered at {clips['width']} x {clips['height']} px, {k} x {k} "
-                     f"ray{'s' if k > 1 else ''} per pixel (TuSimple: 1280 x 720)")
+                     f"ray{'s' if k > 1 else ''} per pixel (TuSimple: 1280 x 720)"
+                     + (f", foveated (the cars and {fov['margin_px']} px around them cast at full resolution, the rest "
+                        f"{fov['factor']}x coarser and upsampled)" if fov["factor"] > 1 else "")
+                     + (f", JPEG frames at quality {clips.get('jpeg_quality', 80)} (as TuSimple's)"
+                        if clips.get("image_format") == "jpg" else ""))
     if "rows" in table_cfg:
         parts.append("E_v in m^2/s^2 (TuSimple protocol, mean of the near / medium / far bins by ground-truth "
                      "distance), every annotated test vehicle scored")

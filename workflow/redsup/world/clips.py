@@ -1,6 +1,7 @@
 """`write_clips`: motorway velocity clips in the TuSimple shape (McCraith ch. 3).
 
-Each clip: 40 front-camera frames at 20 fps (`clips/<n>/imgs/001.png ...`) and `annotation.json`, the
+Each clip: 40 front-camera frames at 20 fps (`clips/<n>/imgs/001.png ...`, or `.jpg` with
+``image_format: jpg``, as TuSimple's) and `annotation.json`, the
 vehicles sufficiently visible in the last frame with their tight box (visible pixels), velocity relative to
 the ego vehicle and position, both in camera ground-plane axes (x right, z forward, origin below the
 camera). `calibration.txt`: `fx fy cx cy`, then the camera height.
@@ -20,7 +21,8 @@ import numpy as np
 from tqdm import tqdm
 
 from .common import SPLIT_CODES, derive_rng, pose, rotate
-from .generate import publish, temp_dir_for, write_png
+from .foveate import render_foveated
+from .generate import publish, temp_dir_for, write_jpg, write_png
 from .gt import instance_boxes, own_pixels
 from .motorway import build_motorway, motorway_state
 from .sensors import R_VEHICLE_FRONT, Camera, intrinsics
@@ -104,15 +106,25 @@ def render_clip(world_cfg: dict, clips_cfg: dict, split: str, seed: int, c: int,
     dom = world_cfg["domains"][clips_cfg["domain"]]
     cam = clip_camera(world_cfg, clips_cfg)
     supersample = int(clips_cfg.get("supersample", 1))
+    fov = clips_cfg.get("foveate") or {"factor": 1, "margin_px": 0}
+    if fov["factor"] > 1 and supersample > 1:
+        raise ValueError("velocity_clips: foveate.factor > 1 and supersample > 1 do not combine")
+    fmt = clips_cfg.get("image_format", "png")
     mw, rng = clip_motorway(world_cfg, clips_cfg, split, seed, c)
     view = SceneView(mw.road, mw.style, mw.cars, mw.buildings)
     (folder / "imgs").mkdir(parents=True)
     for i in range(clips_cfg["frames"]):
         state = motorway_state(mw, i)
         T_wc = state.T_world_vehicle @ cam.T_vehicle_sensor
-        out = render_camera(cam, T_wc, state.prims, view, dom["appearance"], world_cfg["pixel_noise"],
-                            clips_cfg["render_distance"], world_cfg["fog_distance"], rng, supersample=supersample)
-        write_png(folder / "imgs" / f"{i + 1:03d}.png", out["rgb"])
+        args = (cam, T_wc, state.prims, view, dom["appearance"], world_cfg["pixel_noise"],
+                clips_cfg["render_distance"], world_cfg["fog_distance"], rng)
+        out = (render_foveated(*args, factor=fov["factor"], margin=fov["margin_px"]) if fov["factor"] > 1
+               else render_camera(*args, supersample=supersample))
+        path = folder / "imgs" / f"{i + 1:03d}.{fmt}"
+        if fmt == "jpg":
+            write_jpg(path, out["rgb"], clips_cfg.get("jpeg_quality", 80))
+        else:
+            write_png(path, out["rgb"])
     ann = annotate(mw, state, cam, out, clips_cfg, supersample)
     (folder / "annotation.json").write_text(json.dumps(ann, indent=1))
     return ann

@@ -35,6 +35,12 @@ def write_png(path: Path, image: np.ndarray) -> None:
         raise OSError(f"{path}: could not write PNG")
 
 
+def write_jpg(path: Path, image: np.ndarray, quality: int) -> None:
+    """An RGB image as a baseline JPEG of IJG ``quality``."""
+    if not cv2.imwrite(str(path), cv2.cvtColor(image, cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, int(quality)]):
+        raise OSError(f"{path}: could not write JPEG")
+
+
 def depth_png(depth: np.ndarray) -> np.ndarray:
     """KITTI convention: uint16 value / 256 = metres; 0 where there is no surface or beyond 255.99 m."""
     value = np.round(depth * 256.0)

@@ -1,0 +1,130 @@
+"""Foveated rendering of a camera frame: the cars at the camera's full resolution, the rest coarse.
+
+A velocity clip's tracker and annotation look only at the vehicles and a few dozen pixels around them
+(MedianFlow's points lie inside the box, its 30 x 30 NCC patches and its pyramid reach a little beyond), yet at
+TuSimple's 1280 x 720 casting every pixel costs about 20 s a clip on one core, most of it road and sky. Here
+every car's projection, grown by ``margin`` pixels, is cast at full resolution (``crop_camera``: the same
+rays as the full grid's pixels there) and the remainder of the frame is cast on a ``factor``-times coarser grid
+and upsampled (bilinear in linear colour). The domain look and the sensor noise are then applied at the
+camera's own pixels everywhere, so the noise is that of a full render. Inside the windows the linear colour
+(the sky's too: it is taken from the full frame's interpolated sky), labels, instances and depth are those of
+a full render (`tests/test_world_foveate.py`); outside, the image is
+blurrier than a full render's.
+"""
+from __future__ import annotations
+
+import cv2
+import numpy as np
+
+from .common import rotate
+from .prims import CAR_KINDS, Prims
+from .raycast import Pairs
+from .sensors import Camera, box_corners
+from .shade import finish, radiance, sky_image
+from .textures import SKY
+
+
+def crop_camera(cam: Camera, r0: int, r1: int, c0: int, c1: int) -> Camera:
+    """The pixels rows [r0, r1) x columns [c0, c1) of ``cam`` as a camera of their own (same focal length,
+    principal point shifted): its pixel (u, v) is ``cam``'s (c0 + u, r0 + v), cast along the same ray."""
+    K = cam.K.astype(np.float64).copy()
+    K[0, 2] -= c0
+    K[1, 2] -= r0
+    return Camera(cam.name, K, int(c1 - c0), int(r1 - r0), cam.T_vehicle_sensor)
+
+
+def coarse_camera(cam: Camera, factor: int) -> Camera:
+    """``cam`` on a ``factor``-times coarser grid (width and height must divide): coarse pixel (u, v) covers
+    the fine pixels (factor u .. factor u + factor - 1, ...), so f / factor and (c + 0.5) / factor - 0.5."""
+    if cam.width % factor or cam.height % factor:
+        raise ValueError(f"foveate factor {factor} must divide the image size {cam.width} x {cam.height}")
+    K = cam.K.astype(np.float64).copy()
+    K[0, 0] /= factor
+    K[1, 1] /= factor
+    K[0, 2] = (K[0, 2] + 0.5) / factor - 0.5
+    K[1, 2] = (K[1, 2] + 0.5) / factor - 0.5
+    return Camera(cam.name, K, cam.width // factor, cam.height // factor, cam.T_vehicle_sensor)
+
+
+def merge_rects(rects: list[tuple[int, int, int, int]]) -> list[tuple[int, int, int, int]]:
+    """Disjoint rectangles (r0, r1, c0, c1) covering ``rects``: overlapping ones are replaced by their bounding
+    rectangle until none overlap (so every input rectangle lies inside exactly one output rectangle)."""
+    out = [tuple(int(v) for v in r) for r in rects if r[1] > r[0] and r[3] > r[2]]
+    merged = True
+    while merged:
+        merged = False
+        for i in range(len(out)):
+            for j in range(i + 1, len(out)):
+                a, b = out[i], out[j]
+                if a[0] < b[1] and b[0] < a[1] and a[2] < b[3] and b[2] < a[3]:
+                    out[i] = (min(a[0], b[0]), max(a[1], b[1]), min(a[2], b[2]), max(a[3], b[3]))
+                    del out[j]
+                    merged = True
+                    break
+            if merged:
+                break
+    return sorted(out)
+
+
+def car_windows(cam: Camera, T_world_cam: np.ndarray, prims: Prims, margin: int,
+                max_distance: float) -> list[tuple[int, int, int, int]]:
+    """Disjoint pixel rectangles (r0, r1, c0, c1) of ``cam`` holding every car part (``CAR_KINDS`` boxes)
+    nearer than ``max_distance`` that projects into the image, each grown by ``margin`` pixels on every side."""
+    car = np.isin(prims.kind, CAR_KINDS)
+    if not car.any():
+        return []
+    T_cw = np.linalg.inv(T_world_cam)
+    centre = rotate(prims.center[car], T_cw[:3, :3]) + T_cw[:3, 3]
+    near = np.linalg.norm(centre, axis=1) - np.linalg.norm(prims.half[car], axis=1) < max_distance
+    corners = box_corners(prims.center[car][near], prims.rot[car][near], prims.half[car][near])
+    corners = rotate(corners.reshape(-1, 3), T_cw[:3, :3]).reshape(-1, 8, 3) + T_cw[:3, 3]
+    r0, r1, c0, c1 = cam.rects(corners)
+    rects = [(max(a - margin, 0), min(b + margin, cam.height), max(c - margin, 0), min(d + margin, cam.width))
+             for a, b, c, d in zip(r0, r1, c0, c1) if b > a and d > c]
+    return merge_rects(rects)
+
+
+def radiance_foveated(cam: Camera, T_world_cam: np.ndarray, prims: Prims, view, appearance: dict,
+                      render_distance: float, fog_distance: float, factor: int, margin: int) -> dict:
+    """``shade.radiance`` of ``cam`` with the cars' windows (``car_windows``) cast at full resolution and the rest
+    on the ``factor``-times coarser grid, upsampled: dict(linear (H*W, 3), label, instance, depth (H, W), windows,
+    pairs: the windows' ray-primitive pairs, rays numbered as ``cam``'s pixels)."""
+    H, W = cam.height, cam.width
+    coarse = radiance(coarse_camera(cam, factor), T_world_cam, prims, view, appearance, render_distance,
+                      fog_distance)
+    h, w = H // factor, W // factor
+    linear = cv2.resize(coarse["linear"].reshape(h, w, 3), (W, H), interpolation=cv2.INTER_LINEAR)
+    near = {k: cv2.resize(coarse[k], (W, H), interpolation=cv2.INTER_NEAREST) for k in ("label", "depth")}
+    instance = np.zeros((H, W), np.uint16)         # every car lies inside a window: none is drawn coarse
+    windows = car_windows(cam, T_world_cam, prims, margin, render_distance)
+    parts = []
+    sky = None
+    for r0, r1, c0, c1 in windows:
+        win = radiance(crop_camera(cam, r0, r1, c0, c1), T_world_cam, prims, view, appearance, render_distance,
+                       fog_distance)
+        lin = win["linear"].reshape(r1 - r0, c1 - c0, 3)
+        up = win["label"] == SKY
+        if up.any():          # the sky as the full frame interpolates it (its grid is anchored at the corner)
+            sky = sky_image(cam, T_world_cam, view.style).reshape(H, W, 3) if sky is None else sky
+            lin[up] = sky[r0:r1, c0:c1][up]
+        linear[r0:r1, c0:c1] = lin
+        near["label"][r0:r1, c0:c1] = win["label"]
+        near["depth"][r0:r1, c0:c1] = win["depth"]
+        instance[r0:r1, c0:c1] = win["instance"]
+        p = win["pairs"]
+        parts.append(Pairs((r0 + p.ray // (c1 - c0)) * W + c0 + p.ray % (c1 - c0), p.prim, p.t_in, p.t_out,
+                           p.face_in, p.face_out))
+    fields = ("ray", "prim", "t_in", "t_out", "face_in", "face_out")
+    pairs = (Pairs(*(np.concatenate([getattr(q, f) for q in parts]) for f in fields)) if parts
+             else Pairs(*(getattr(coarse["pairs"], f)[:0] for f in fields)))
+    return {"linear": linear.reshape(-1, 3), "label": near["label"], "instance": instance, "depth": near["depth"],
+            "windows": windows, "pairs": pairs}
+
+
+def render_foveated(cam: Camera, T_world_cam: np.ndarray, prims: Prims, view, appearance: dict, pixel_noise: float,
+                    render_distance: float, fog_distance: float, rng: np.random.Generator, factor: int,
+                    margin: int) -> dict:
+    """``radiance_foveated`` given the domain look and sensor noise at every pixel: adds rgb (H, W, 3) uint8."""
+    out = radiance_foveated(cam, T_world_cam, prims, view, appearance, render_distance, fog_distance, factor, margin)
+    out["rgb"] = finish(out.pop("linear"), appearance, pixel_noise, rng).reshape(cam.height, cam.width, 3)
+    return out
