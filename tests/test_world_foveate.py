@@ -155,3 +155,4 @@ def test_foveated_jpeg_clips(cfg, tmp_path):
         assert np.mean(np.abs(img.astype(int) - ref.astype(int))) < 12     # JPEG at quality 80, the 80 x 45 blur
     with pytest.raises(ValueError, match="supersample"):
         write_clips(world, dict(fov, supersample=2), "train", 5, tmp_path / "bad")
+    assert not (tmp_path / "bad").exists() and not list(tmp_path.glob(".*bad*"))   # refused before rendering

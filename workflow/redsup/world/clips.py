@@ -107,8 +107,6 @@ def render_clip(world_cfg: dict, clips_cfg: dict, split: str, seed: int, c: int,
     cam = clip_camera(world_cfg, clips_cfg)
     supersample = int(clips_cfg.get("supersample", 1))
     fov = clips_cfg.get("foveate") or {"factor": 1, "margin_px": 0}
-    if fov["factor"] > 1 and supersample > 1:
-        raise ValueError("velocity_clips: foveate.factor > 1 and supersample > 1 do not combine")
     fmt = clips_cfg.get("image_format", "png")
     mw, rng = clip_motorway(world_cfg, clips_cfg, split, seed, c)
     view = SceneView(mw.road, mw.style, mw.cars, mw.buildings)
@@ -139,6 +137,8 @@ def write_clips(world_cfg: dict, clips_cfg: dict, split: str, seed: int, out_dir
     if clips_cfg["domain"] not in world_cfg["domains"]:
         raise ValueError(f"velocity_clips.domain {clips_cfg['domain']!r} is not a world domain "
                          f"(have {sorted(world_cfg['domains'])})")
+    if (clips_cfg.get("foveate") or {"factor": 1})["factor"] > 1 and int(clips_cfg.get("supersample", 1)) > 1:
+        raise ValueError("velocity_clips: foveate.factor > 1 and supersample > 1 do not combine")
     start = time.time()
     spec = clips_cfg["splits"][split]
     cam = clip_camera(world_cfg, clips_cfg)
