@@ -16,11 +16,12 @@ velocity costs when the relative velocity changes within the clip (``truth_diagn
     python benchmarks/bench_velocity_resolution.py --clips 40 --widths 320 --supersample 1 2 --split val
     python benchmarks/bench_velocity_resolution.py --clips 40 --widths 320 640 --split val --truth
     python benchmarks/bench_velocity_resolution.py --clips 20 --widths 1280 --split val --truth \
-        --foveate 1:0 4:48 --image-format png jpg      # foveated rendering (redsup.world.foveate), JPEG frames
+        --foveate 1:0 4:48 4:48:32 --image-format png jpg      # foveated rendering (redsup.world.foveate), JPEG
 
-``--foveate F:M`` renders the cars' windows (grown by M px) at full resolution and the rest on an F-times coarser
-grid (``velocity_clips.foveate``; 1:0 = every pixel cast); render seconds are then also given as the rendering
-process's CPU seconds (``render_cpu_s``), which another job on the machine disturbs less than the wall time.
+``--foveate F:M[:T]`` renders the cars' windows (grown by M px, then to the image's T-px tile grid) at full
+resolution and the rest on an F-times coarser grid (``velocity_clips.foveate``; 1:0 = every pixel cast); render
+seconds are then also given as the rendering process's CPU seconds (``render_cpu_s``), which another job on the
+machine disturbs less than the wall time.
 """
 from __future__ import annotations
 
@@ -51,13 +52,14 @@ def measure(cfg: dict, width: int, split: str, clips: int, workdir: Path, supers
     ``trackers`` (detection.medianflow.tracker: OpenCV MedianFlow parameters); one dict each."""
     ccfg = copy.deepcopy(cfg["velocity_clips"])
     ccfg["supersample"] = supersample
-    ccfg["foveate"] = {"factor": int(foveate[0]), "margin_px": int(foveate[1])}
+    ccfg["foveate"] = {"factor": int(foveate[0]), "margin_px": int(foveate[1]),
+                       "tile_px": int(foveate[2]) if len(foveate) > 2 else 1}
     ccfg["image_format"] = image_format
     base_w = ccfg["width"]
     ccfg["width"], ccfg["height"] = width, width * 9 // 16
     ccfg["min_visible_px"] = int(round(ccfg["min_visible_px"] * (width / base_w) ** 2))
     ccfg["splits"] = {split: {**ccfg["splits"][split], "clips": clips}}
-    out = workdir / f"w{width}_k{supersample}_f{foveate[0]}m{foveate[1]}_{image_format}"
+    out = workdir / f"w{width}_k{supersample}_f{'_'.join(str(v) for v in foveate)}_{image_format}"
     t0, c0 = time.perf_counter(), time.process_time()
     write_clips(cfg["world"], ccfg, split, cfg["seed"], out)
     render_s, render_cpu = (time.perf_counter() - t0) / clips, (time.process_time() - c0) / clips
@@ -77,7 +79,7 @@ def measure(cfg: dict, width: int, split: str, clips: int, workdir: Path, supers
                 distance[sel] = true_distances(cfg["world"], ccfg, split, cfg["seed"], int(c), tracks.track_id[sel])
             d.update(truth_diagnosis(tracks, distance, float(ccfg["fps"])))
         rows.append({**d, "render_s_per_clip": render_s, "render_cpu_s_per_clip": render_cpu,
-                     "track_s_per_clip": (t2 - t1) / clips, "foveate": f"{foveate[0]}:{foveate[1]}",
+                     "track_s_per_clip": (t2 - t1) / clips, "foveate": ":".join(str(v) for v in foveate),
                      "image_format": image_format,
                      "vehicles": len(tracks), "failed": int(tracks.tracker_failed.sum()), "track_scale": scale,
                      "tracker": ",".join(f"{k}={v}" for k, v in tracker.items()) or "defaults"})
@@ -105,7 +107,8 @@ def main(argv=None) -> None:
                    help="detection.medianflow.tracker settings to compare on the same render, each as "
                         "key=value,key=value (keys: redsup.prep.medianflow.TRACKER_PARAMS); '' = the config's")
     p.add_argument("--foveate", nargs="+", default=["1:0"],
-                   help="velocity_clips.foveate factor:margin_px values, each rendered (1:0 = every pixel cast)")
+                   help="velocity_clips.foveate factor:margin_px[:tile_px] values, each rendered (1:0 = every pixel "
+                        "cast; tile_px 1 unless given)")
     p.add_argument("--image-format", nargs="+", default=["png"], choices=["png", "jpg"],
                    help="frame files (jpg at velocity_clips.jpeg_quality)")
     args = p.parse_args(argv)

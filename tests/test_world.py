@@ -402,7 +402,7 @@ def test_supersampled_clip_pixels_integrate_their_area(cfg, tmp_path):
     annotated boxes lie on the half-pixel grid (sub-pixel), still consistent with eq. (1)."""
     world = copy.deepcopy(cfg["world"])
     clips = copy.deepcopy(cfg["velocity_clips"])
-    clips.update(width=160, height=90, frames=2, supersample=2, foveate={"factor": 1, "margin_px": 0},
+    clips.update(width=160, height=90, frames=2, supersample=2, foveate={"factor": 1, "margin_px": 0, "tile_px": 1},
                  image_format="png")
     clips["splits"]["train"] = {"clips": 2, "velocity_scale": 1.0}
     write_clips(world, clips, "train", 5, tmp_path / "ss")

@@ -12,7 +12,7 @@ import pytest
 from redsup import config
 from redsup.world.clips import annotate, clip_camera, clip_motorway, write_clips
 from redsup.world.common import derive_rng, pose
-from redsup.world.foveate import car_windows, coarse_camera, crop_camera, merge_rects, render_foveated
+from redsup.world.foveate import car_windows, coarse_camera, crop_camera, merge_rects, render_foveated, snap_rect
 from redsup.world.gt import own_pixels
 from redsup.world.motorway import motorway_state
 from redsup.world.prims import car_prims
@@ -79,7 +79,7 @@ def _clip_cfg(cfg):
     world = copy.deepcopy(cfg["world"])
     world["pixel_noise"] = 0.0
     clips = copy.deepcopy(cfg["velocity_clips"])
-    clips.update(width=320, height=180, frames=3, supersample=1, foveate={"factor": 1, "margin_px": 0},
+    clips.update(width=320, height=180, frames=3, supersample=1, foveate={"factor": 1, "margin_px": 0, "tile_px": 1},
                  image_format="png")                       # every pixel cast: the reference
     clips["splits"]["train"] = {"clips": 2, "velocity_scale": 1.0}
     return world, clips
@@ -101,7 +101,7 @@ def test_foveated_frame_is_the_full_render_at_every_car(cfg):
         args = (cam, T_wc, state.prims, view, dom["appearance"], 0.0, clips["render_distance"],
                 world["fog_distance"], derive_rng(3))
         full = render_camera(*args)
-        fov = render_foveated(*args, factor=4, margin=12)
+        fov = render_foveated(*args, factor=4, margin=12, tile=8)
         n = len(mw.cars["size"])
         assert np.array_equal(fov["instance"], full["instance"])
         assert np.array_equal(own_pixels(fov["pairs"], state.prims, n), own_pixels(full["pairs"], state.prims, n))
@@ -138,11 +138,48 @@ def test_car_windows_cover_every_car_part_with_the_margin(cfg):
     assert none == []
 
 
+def test_snap_rect_by_hand():
+    """Rows 5..40 x columns 33..70 on a 32-px grid: rows 0..64, columns 32..96; at the image's border the grid's
+    last tile is cut to the image; tile 1 changes nothing."""
+    assert snap_rect((5, 40, 33, 70), 32, 720, 1280) == (0, 64, 32, 96)
+    assert snap_rect((700, 715, 1250, 1279), 32, 720, 1280) == (672, 720, 1248, 1280)
+    assert snap_rect((64, 96, 0, 32), 32, 720, 1280) == (64, 96, 0, 32)       # already on the grid
+    assert snap_rect((5, 40, 33, 70), 1, 720, 1280) == (5, 40, 33, 70)
+
+
+def test_car_windows_lie_on_the_tile_grid_and_do_not_follow_the_car(cfg):
+    """With tiles, every window edge is a multiple of the tile or the image border, and every window without
+    tiles lies inside one with tiles. Over a clip the untiled windows' edges take a new position whenever a car's
+    projection moves or grows (each one a frame of the car's true size); the tiled edges only visit grid lines:
+    far fewer positions, fixed in the image."""
+    world, clips = _clip_cfg(cfg)
+    tile, frames = 32, 40
+    clips.update(frames=frames, width=1280, height=720)       # the default's frame (no pixel is rendered here)
+    cam = clip_camera(world, clips)
+    mw, _ = clip_motorway(world, clips, "train", 5, 0)
+    edges, edges_tiled = set(), set()
+    for i in range(frames):
+        state = motorway_state(mw, i)
+        T_wc = state.T_world_vehicle @ cam.T_vehicle_sensor
+        plain = car_windows(cam, T_wc, state.prims, 48, clips["render_distance"])
+        tiled = car_windows(cam, T_wc, state.prims, 48, clips["render_distance"], tile)
+        assert plain and tiled
+        for r0, r1, c0, c1 in tiled:
+            assert r0 % tile == 0 and c0 % tile == 0
+            assert r1 % tile == 0 or r1 == cam.height
+            assert c1 % tile == 0 or c1 == cam.width
+        for a in plain:
+            assert any(b[0] <= a[0] and a[1] <= b[1] and b[2] <= a[2] and a[3] <= b[3] for b in tiled)
+        edges |= {(k, v) for w in plain for k, v in enumerate(w)}
+        edges_tiled |= {(k, v) for w in tiled for k, v in enumerate(w)}
+    assert len(edges_tiled) * 3 <= len(edges)
+
+
 def test_foveated_jpeg_clips(cfg, tmp_path):
     """foveate + image_format jpg: the frames are 001.jpg ... and the annotations those of the full render."""
     world, clips = _clip_cfg(cfg)
     write_clips(world, clips, "train", 5, tmp_path / "full")
-    fov = dict(clips, foveate={"factor": 4, "margin_px": 12}, image_format="jpg", jpeg_quality=80)
+    fov = dict(clips, foveate={"factor": 4, "margin_px": 12, "tile_px": 8}, image_format="jpg", jpeg_quality=80)
     write_clips(world, fov, "train", 5, tmp_path / "fov")
     for k in (1, 2):
         a, b = (json.loads((tmp_path / d / "clips" / str(k) / "annotation.json").read_text()) for d in ("full", "fov"))

@@ -106,7 +106,7 @@ def render_clip(world_cfg: dict, clips_cfg: dict, split: str, seed: int, c: int,
     dom = world_cfg["domains"][clips_cfg["domain"]]
     cam = clip_camera(world_cfg, clips_cfg)
     supersample = int(clips_cfg.get("supersample", 1))
-    fov = clips_cfg.get("foveate") or {"factor": 1, "margin_px": 0}
+    fov = clips_cfg.get("foveate") or {"factor": 1, "margin_px": 0, "tile_px": 1}
     fmt = clips_cfg.get("image_format", "png")
     mw, rng = clip_motorway(world_cfg, clips_cfg, split, seed, c)
     view = SceneView(mw.road, mw.style, mw.cars, mw.buildings)
@@ -116,7 +116,8 @@ def render_clip(world_cfg: dict, clips_cfg: dict, split: str, seed: int, c: int,
         T_wc = state.T_world_vehicle @ cam.T_vehicle_sensor
         args = (cam, T_wc, state.prims, view, dom["appearance"], world_cfg["pixel_noise"],
                 clips_cfg["render_distance"], world_cfg["fog_distance"], rng)
-        out = (render_foveated(*args, factor=fov["factor"], margin=fov["margin_px"]) if fov["factor"] > 1
+        out = (render_foveated(*args, factor=fov["factor"], margin=fov["margin_px"], tile=fov["tile_px"])
+               if fov["factor"] > 1
                else render_camera(*args, supersample=supersample))
         path = folder / "imgs" / f"{i + 1:03d}.{fmt}"
         if fmt == "jpg":

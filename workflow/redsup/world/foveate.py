@@ -3,7 +3,8 @@
 A velocity clip's tracker and annotation look only at the vehicles and a few dozen pixels around them
 (MedianFlow's points lie inside the box, its 30 x 30 NCC patches and its pyramid reach a little beyond), yet at
 TuSimple's 1280 x 720 casting every pixel costs about 20 s a clip on one core, most of it road and sky. Here
-every car's projection, grown by ``margin`` pixels, is cast at full resolution (``crop_camera``: the same
+every car's projection, grown by ``margin`` pixels and then to a fixed grid of ``tile``-pixel tiles (so the
+edge between sharp and upsampled pixels never moves with a car), is cast at full resolution (``crop_camera``: the same
 rays as the full grid's pixels there) and the remainder of the frame is cast on a ``factor``-times coarser grid
 and upsampled (bilinear in linear colour). The domain look and the sensor noise are then applied at the
 camera's own pixels everywhere, so the noise is that of a full render. Inside the windows the linear colour
@@ -66,10 +67,21 @@ def merge_rects(rects: list[tuple[int, int, int, int]]) -> list[tuple[int, int, 
     return sorted(out)
 
 
+def snap_rect(rect: tuple[int, int, int, int], tile: int, height: int, width: int) -> tuple[int, int, int, int]:
+    """``rect`` (r0, r1, c0, c1) grown outwards to the image's fixed grid of ``tile`` x ``tile`` pixel tiles
+    (anchored at pixel (0, 0)) and clipped to the image; tile 1 leaves it as it is."""
+    r0, r1, c0, c1 = rect
+    return (r0 // tile * tile, min(-(-r1 // tile) * tile, height),
+            c0 // tile * tile, min(-(-c1 // tile) * tile, width))
+
+
 def car_windows(cam: Camera, T_world_cam: np.ndarray, prims: Prims, margin: int,
-                max_distance: float) -> list[tuple[int, int, int, int]]:
+                max_distance: float, tile: int = 1) -> list[tuple[int, int, int, int]]:
     """Disjoint pixel rectangles (r0, r1, c0, c1) of ``cam`` holding every car part (``CAR_KINDS`` boxes)
-    nearer than ``max_distance`` that projects into the image, each grown by ``margin`` pixels on every side."""
+    nearer than ``max_distance`` that projects into the image, each grown by ``margin`` pixels on every side and
+    then to the fixed grid of ``tile``-pixel tiles (``snap_rect``). With tiles, a window's edges lie on lines
+    fixed in the image: the boundary between full-resolution and upsampled pixels (a change of sharpness) does not
+    move or grow with the car, so it cannot show a tracker the car's true motion or size change."""
     car = np.isin(prims.kind, CAR_KINDS)
     if not car.any():
         return []
@@ -79,15 +91,16 @@ def car_windows(cam: Camera, T_world_cam: np.ndarray, prims: Prims, margin: int,
     corners = box_corners(prims.center[car][near], prims.rot[car][near], prims.half[car][near])
     corners = rotate(corners.reshape(-1, 3), T_cw[:3, :3]).reshape(-1, 8, 3) + T_cw[:3, 3]
     r0, r1, c0, c1 = cam.rects(corners)
-    rects = [(max(a - margin, 0), min(b + margin, cam.height), max(c - margin, 0), min(d + margin, cam.width))
+    rects = [snap_rect((max(a - margin, 0), min(b + margin, cam.height), max(c - margin, 0),
+                        min(d + margin, cam.width)), tile, cam.height, cam.width)
              for a, b, c, d in zip(r0, r1, c0, c1) if b > a and d > c]
     return merge_rects(rects)
 
 
 def radiance_foveated(cam: Camera, T_world_cam: np.ndarray, prims: Prims, view, appearance: dict,
-                      render_distance: float, fog_distance: float, factor: int, margin: int) -> dict:
-    """``shade.radiance`` of ``cam`` with the cars' windows (``car_windows``) cast at full resolution and the rest
-    on the ``factor``-times coarser grid, upsampled: dict(linear (H*W, 3), label, instance, depth (H, W), windows,
+                      render_distance: float, fog_distance: float, factor: int, margin: int, tile: int = 1) -> dict:
+    """``shade.radiance`` of ``cam`` with the cars' windows (``car_windows``, on ``tile``-pixel tiles) cast at
+    full resolution and the rest on the ``factor``-times coarser grid, upsampled: dict(linear (H*W, 3), label, instance, depth (H, W), windows,
     pairs: the windows' ray-primitive pairs, rays numbered as ``cam``'s pixels)."""
     H, W = cam.height, cam.width
     coarse = radiance(coarse_camera(cam, factor), T_world_cam, prims, view, appearance, render_distance,
@@ -96,7 +109,7 @@ def radiance_foveated(cam: Camera, T_world_cam: np.ndarray, prims: Prims, view, 
     linear = cv2.resize(coarse["linear"].reshape(h, w, 3), (W, H), interpolation=cv2.INTER_LINEAR)
     near = {k: cv2.resize(coarse[k], (W, H), interpolation=cv2.INTER_NEAREST) for k in ("label", "depth")}
     instance = np.zeros((H, W), np.uint16)         # every car lies inside a window: none is drawn coarse
-    windows = car_windows(cam, T_world_cam, prims, margin, render_distance)
+    windows = car_windows(cam, T_world_cam, prims, margin, render_distance, tile)
     parts = []
     sky = None
     for r0, r1, c0, c1 in windows:
@@ -123,8 +136,9 @@ def radiance_foveated(cam: Camera, T_world_cam: np.ndarray, prims: Prims, view, 
 
 def render_foveated(cam: Camera, T_world_cam: np.ndarray, prims: Prims, view, appearance: dict, pixel_noise: float,
                     render_distance: float, fog_distance: float, rng: np.random.Generator, factor: int,
-                    margin: int) -> dict:
+                    margin: int, tile: int = 1) -> dict:
     """``radiance_foveated`` given the domain look and sensor noise at every pixel: adds rgb (H, W, 3) uint8."""
-    out = radiance_foveated(cam, T_world_cam, prims, view, appearance, render_distance, fog_distance, factor, margin)
+    out = radiance_foveated(cam, T_world_cam, prims, view, appearance, render_distance, fog_distance, factor, margin,
+                            tile)
     out["rgb"] = finish(out.pop("linear"), appearance, pixel_noise, rng).reshape(cam.height, cam.width, 3)
     return out
