@@ -93,7 +93,8 @@ def main(argv=None) -> int:
             variants[f"gate {g} sigma {s}"] = (tr, va, s)
     for d in a.train_clips:
         d = Path(d)
-        tr = split(tracks(d, work / f"train_{hashlib.md5(str(d.resolve()).encode()).hexdigest()[:8]}/medianflow.npz", mf), d)
+        key = hashlib.md5(str(d.resolve()).encode()).hexdigest()[:8]
+        tr = split(tracks(d, work / f"train_{key}/medianflow.npz", mf), d)
         variants[f"train {d} ({len(tr)} vehicles)"] = (tr, base_val, 0.0)
     seeds = a.seeds
     base = val_errors(cfg, base_train, base_val, 0.0, seeds)

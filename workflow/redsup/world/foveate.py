@@ -4,9 +4,9 @@ A velocity clip's tracker and annotation look only at the vehicles and a few doz
 (MedianFlow's points lie inside the box, its 30 x 30 NCC patches and its pyramid reach a little beyond), yet at
 TuSimple's 1280 x 720 casting every pixel costs about 20 s a clip on one core, most of it road and sky. Here
 every car's projection, grown by ``margin`` pixels and then to a fixed grid of ``tile``-pixel tiles (so the
-edge between sharp and upsampled pixels never moves with a car), is cast at full resolution (``crop_camera``: the same
-rays as the full grid's pixels there) and the remainder of the frame is cast on a ``factor``-times coarser grid
-and upsampled (bilinear in linear colour). The domain look and the sensor noise are then applied at the
+edge between sharp and upsampled pixels never moves with a car), is cast at full resolution (``crop_camera``:
+the same rays as the full grid's pixels there) and the remainder of the frame is cast on a ``factor``-times
+coarser grid and upsampled (bilinear in linear colour). The domain look and the sensor noise are then applied at the
 camera's own pixels everywhere, so the noise is that of a full render. Inside the windows the linear colour
 (the sky's too: it is taken from the full frame's interpolated sky), labels, instances and depth are those of
 a full render (`tests/test_world_foveate.py`); outside, the image is
@@ -100,8 +100,9 @@ def car_windows(cam: Camera, T_world_cam: np.ndarray, prims: Prims, margin: int,
 def radiance_foveated(cam: Camera, T_world_cam: np.ndarray, prims: Prims, view, appearance: dict,
                       render_distance: float, fog_distance: float, factor: int, margin: int, tile: int = 1) -> dict:
     """``shade.radiance`` of ``cam`` with the cars' windows (``car_windows``, on ``tile``-pixel tiles) cast at
-    full resolution and the rest on the ``factor``-times coarser grid, upsampled: dict(linear (H*W, 3), label, instance, depth (H, W), windows,
-    pairs: the windows' ray-primitive pairs, rays numbered as ``cam``'s pixels)."""
+    full resolution and the rest on the ``factor``-times coarser grid, upsampled: dict(linear (H*W, 3), label,
+    instance, depth (H, W), windows, pairs: the windows' ray-primitive pairs, rays numbered as ``cam``'s
+    pixels)."""
     H, W = cam.height, cam.width
     coarse = radiance(coarse_camera(cam, factor), T_world_cam, prims, view, appearance, render_distance,
                       fog_distance)
