@@ -2,6 +2,8 @@
 the TuSimple metric and bad-input handling. (MedianFlow on a rendered clip: tests/test_tracks.py.)"""
 from __future__ import annotations
 
+import copy
+
 import math
 from pathlib import Path
 
@@ -568,9 +570,11 @@ def test_table_caption_states_the_render_and_the_epoch_kept():
     tcfg = cfg["velocity"]["tables"]["mccraith_ch3_table2"]
     note = table_note(cfg, tcfg)
     assert "embedded clips rendered at 1280 x 720 px, 1 x 1 ray per pixel (TuSimple: 1280 x 720), foveated (the cars " \
-           "and 48 px around them cast at full resolution on a fixed 32-px tile grid, the rest 4x coarser and " \
-           "upsampled), JPEG frames at " \
+           "and 48 px around them cast at full resolution, the rest 4x coarser and upsampled), JPEG frames at " \
            "quality 80" in note
+    tiled = copy.deepcopy(cfg)
+    tiled["velocity_clips"]["foveate"]["tile_px"] = 32
+    assert "cast at full resolution on a fixed 32-px tile grid, the rest 4x coarser" in table_note(tiled, tcfg)
     assert "the epoch with the lowest val loss kept" in note
     assert "scale by more than e^0.1 per frame rejected" in note
     cfg["velocity_clips"].update(supersample=2, foveate={"factor": 1, "margin_px": 0, "tile_px": 1}, image_format="png")
