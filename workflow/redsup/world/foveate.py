@@ -3,8 +3,8 @@
 A velocity clip's tracker and annotation look only at the vehicles and a few dozen pixels around them
 (MedianFlow's points lie inside the box, its 30 x 30 NCC patches and its pyramid reach a little beyond), yet at
 TuSimple's 1280 x 720 casting every pixel costs about 20 s a clip on one core, most of it road and sky. Here
-every car's projection, grown by ``margin`` pixels and then to a fixed grid of ``tile``-pixel tiles (so the
-edge between sharp and upsampled pixels never moves with a car), is cast at full resolution (``crop_camera``:
+every car's projection, grown by ``margin`` pixels (and, with ``tile`` > 1, to a fixed grid of ``tile``-pixel
+tiles), is cast at full resolution (``crop_camera``:
 the same rays as the full grid's pixels there) and the remainder of the frame is cast on a ``factor``-times
 coarser grid and upsampled (bilinear in linear colour). The domain look and the sensor noise are then applied at the
 camera's own pixels everywhere, so the noise is that of a full render. Inside the windows the linear colour
@@ -80,8 +80,8 @@ def car_windows(cam: Camera, T_world_cam: np.ndarray, prims: Prims, margin: int,
     """Disjoint pixel rectangles (r0, r1, c0, c1) of ``cam`` holding every car part (``CAR_KINDS`` boxes)
     nearer than ``max_distance`` that projects into the image, each grown by ``margin`` pixels on every side and
     then to the fixed grid of ``tile``-pixel tiles (``snap_rect``). With tiles, a window's edges lie on lines
-    fixed in the image: the boundary between full-resolution and upsampled pixels (a change of sharpness) does not
-    move or grow with the car, so it cannot show a tracker the car's true motion or size change."""
+    fixed in the image instead of moving with the car, but jump by a tile when a car crosses a grid line; on val
+    those jumps cost the tracker more than the moving edge (config.yaml, velocity_clips.foveate), so clips use 1."""
     car = np.isin(prims.kind, CAR_KINDS)
     if not car.any():
         return []
