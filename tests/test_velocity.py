@@ -3,7 +3,6 @@ the TuSimple metric and bad-input handling. (MedianFlow on a rendered clip: test
 from __future__ import annotations
 
 import copy
-
 import math
 from pathlib import Path
 
