@@ -249,6 +249,21 @@ def test_record_with_unknown_parent_gets_one(tmp_path):
     assert "something_new" in reg["parents"] and reg["imported"] == 1
 
 
+def test_record_keeps_the_jobs_own_cpu_seconds(tmp_path):
+    """job.cpu_s = the process's getrusage CPU at the end of child_run: it counts a child process's CPU (a
+    sampler polling every 30 s would miss it) and the CPU spent inside the block."""
+    before = runlog.process_cpu_seconds()
+    with runlog.child_run(tmp_path / "x.json", "p", "x", rule="r", wildcards={}, config={}):
+        subprocess.run([sys.executable, "-c", "import time\nt = time.process_time()\n"
+                        "while time.process_time() - t < 0.3: pass"], check=True)
+        t = time.process_time()
+        while time.process_time() - t < 0.2:
+            pass
+    after = runlog.process_cpu_seconds()
+    cpu = json.loads((tmp_path / "x.json").read_text())["job"]["cpu_s"]
+    assert before + 0.5 <= cpu <= after + 1e-3
+
+
 def test_plan_validation(tmp_path):
     with pytest.raises(ValueError, match="unknown stage"):
         tracking.init_store(f"sqlite:///{tmp_path}/x.db", {"stages": {}, "parents": [{"name": "a", "stage": "b"}]},

@@ -52,21 +52,30 @@ def test_summary_per_rule_and_stage_sorted_by_total(tmp_path):
     _bench(root / "table/tables/t.tsv", 1.0, 80.0, 1.0)
     _bench(root / "benchmark_summary/tables/run_time.tsv", 99.0, 1.0, 1.0)  # its own file: excluded
     stages = {"world_scene": "world", "train_depth": "depth", "table": "tables"}
+    # train_001's run record has the job's own CPU seconds: they replace Snakemake's sampled 29.0
+    record = tmp_path / "runs/raw/d/train_001.json"
+    record.parent.mkdir(parents=True)
+    record.write_text(json.dumps({"job": {"uid": "u", "cpu_s": 31.5}}))
+    (tmp_path / "runs/raw/d/train_000.json").write_text(json.dumps({"job": {"uid": "v"}}))   # older: no cpu_s
     jobs = benchmarks.collect(root, stages, exclude=("benchmark_summary",))
     assert len(jobs) == 4
+    assert [(j["job"], j["cpu_s"], j["cpu_source"]) for j in jobs if j["rule"] == "world_scene"] == \
+        [("raw/d/train_000", 9.0, "benchmark"), ("raw/d/train_001", 31.5, "job")]
     rules = benchmarks.summarise(jobs, "rule")
     assert [r["rule"] for r in rules] == ["world_scene", "train_depth", "table"]
     ws = rules[0]
     assert (ws["jobs"], ws["total_s"], ws["mean_s"], ws["max_s"], ws["cpu_s"], ws["peak_rss_mb"]) == \
-        (2, 40.0, 20.0, 30.0, 38.0, 250.0)
+        (2, 40.0, 20.0, 30.0, 40.5, 250.0)
     assert ws["stage"] == "world"
     by_stage = benchmarks.summarise(jobs, "stage")
     assert [(r["stage"], r["total_s"]) for r in by_stage] == [("world", 40.0), ("depth", 25.0), ("tables", 1.0)]
     md, png = tmp_path / "run_time.md", tmp_path / "run_time.png"
     benchmarks.write_summary(root, md, png, stages, exclude=("benchmark_summary",))
     text = md.read_text()
-    assert "66.0 job-seconds" in text and "| world_scene | world | 2 | 40.0 | 60.6 % | 20.00 | 30.00 | 38.0 | 250.0 |" \
+    assert "66.0 job-seconds" in text and "| world_scene | world | 2 | 40.0 | 60.6 % | 20.00 | 30.00 | 40.5 | 250.0 |" \
         in text
+    assert "for 1 of 4 jobs (31.5 s; Snakemake's benchmark cpu_time, sampled every 30 s after a job's first 30 s, " \
+        "has 29.0 s for them); the others: Snakemake's sampled cpu_time" in text
     assert text.index("| world |") < text.index("| depth |") < text.index("| tables |")
     assert png.stat().st_size > 5000
     with pytest.raises(ValueError, match="no benchmark files"):
@@ -126,6 +135,8 @@ def test_every_table_filter_returns_exactly_its_runs(work):
     assert shared.data.tags["redsup.tables"] == f"{T1},{T2}"
     assert shared.data.tags["redsup.record_path"] == "results/runs/velocity/shared/metrics.json"
     assert shared.data.metrics["job_wall_s"] == 7.5 and shared.data.metrics["job_max_rss_mb"] == 123.0
+    own_cpu = json.loads((runs / "velocity/shared/metrics.json").read_text())["job"]["cpu_s"]
+    assert shared.data.metrics["job_cpu_s"] == pytest.approx(own_cpu) != 6.0   # the job's getrusage, not the sample
     parent2 = client.get_run(reg["parents"][T2])
     assert {a.path for a in client.list_artifacts(parent2.info.run_id, "table")} == \
         {f"table/{T2}.md", f"table/{T2}.csv"}

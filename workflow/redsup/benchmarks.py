@@ -3,7 +3,9 @@
 Every rule writes ``results/benchmarks/<rule>/<its log path below results/logs, mirrored>.tsv`` (one line per
 job: wall seconds ``s``, ``max_rss`` in MB, ``cpu_time`` in s, ...). ``summarise`` adds them up per rule and
 per stage (the rule file that defines the rule: world, prepare, velocity, depth, ...), sorted by total wall
-time; ``write_summary`` writes the markdown table and the figure of ``rule benchmark_summary``.
+time; ``write_summary`` writes the markdown table and the figure of ``rule benchmark_summary``. CPU seconds
+come from each job's run record (``job.cpu_s``, its own getrusage) where it has them: Snakemake samples a job's
+CPU every second for 30 s and then every 30 s, so its ``cpu_time`` misses up to 30 s of a longer job.
 ``benchmark_path`` / ``job_metrics`` give the file and the MLflow metrics of one job's run record.
 
 Torch-free and MLflow-free (imported by the tracking import and the summary job).
@@ -58,18 +60,41 @@ def job_metrics(path: str | Path) -> dict[str, float]:
     return {metric: values[col] for col, metric in METRIC_NAMES.items() if math.isfinite(values[col])}
 
 
-def collect(root: str | Path, rule_stages: Mapping[str, str], exclude: tuple[str, ...] = ()) -> list[dict]:
-    """Every benchmark file under ``root``: one dict per job (rule, stage, job, wall_s, max_rss_mb, cpu_s)."""
+def record_cpu_seconds(record_path: str | Path) -> float:
+    """``job.cpu_s`` of a run record (the job's own getrusage CPU seconds, `redsup.runlog.child_run`); NaN where
+    the record is missing, unreadable or older than that field."""
+    import json
+
+    try:
+        with open(record_path) as fh:
+            value = (json.load(fh).get("job") or {}).get("cpu_s")
+    except (OSError, ValueError):
+        return math.nan
+    return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else math.nan
+
+
+def collect(root: str | Path, rule_stages: Mapping[str, str], exclude: tuple[str, ...] = (),
+            runs_root: str | Path | None = None) -> list[dict]:
+    """Every benchmark file under ``root``: one dict per job (rule, stage, job, wall_s, max_rss_mb, cpu_s,
+    cpu_source, sampled_cpu_s). ``cpu_s`` is the job's own CPU time from its run record
+    (``<runs_root>/<x>.json`` beside ``<root>/<rule>/<x>.tsv``; default ``runs_root``: ``runs`` beside
+    ``root``), ``cpu_source`` "job"; where the record lacks it, Snakemake's sampled ``cpu_time`` (``cpu_source``
+    "benchmark"), a lower bound for jobs longer than 30 s (`redsup.runlog.process_cpu_seconds`)."""
     root = Path(root)
+    runs = Path(runs_root) if runs_root is not None else root.parent / "runs"
     jobs = []
     for path in sorted(root.rglob("*.tsv")) if root.exists() else []:
         rule = path.relative_to(root).parts[0]
         if rule in exclude:
             continue
         values = read_benchmark(path)
-        jobs.append({"rule": rule, "stage": rule_stages.get(rule, "unknown"),
-                     "job": str(path.relative_to(root / rule).with_suffix("")),
-                     "wall_s": values["s"], "max_rss_mb": values["max_rss"], "cpu_s": values["cpu_time"]})
+        job = path.relative_to(root / rule).with_suffix("")
+        own = record_cpu_seconds(runs / job.with_suffix(".json"))
+        jobs.append({"rule": rule, "stage": rule_stages.get(rule, "unknown"), "job": str(job),
+                     "wall_s": values["s"], "max_rss_mb": values["max_rss"],
+                     "cpu_s": own if math.isfinite(own) else values["cpu_time"],
+                     "cpu_source": "job" if math.isfinite(own) else "benchmark",
+                     "sampled_cpu_s": values["cpu_time"]})
     return jobs
 
 
@@ -97,13 +122,27 @@ def _fmt(value: float, digits: int = 1) -> str:
     return "n/a" if not math.isfinite(value) else f"{value:.{digits}f}"
 
 
+def _cpu_note(jobs: list[dict]) -> str:
+    """Where the CPU column comes from, with the sampled total it replaces."""
+    own = [j for j in jobs if j.get("cpu_source") == "job"]
+    note = (f"CPU s: the job's own user + system seconds (getrusage, its run record's job.cpu_s) for {len(own)} of "
+            f"{len(jobs)} jobs")
+    if own:
+        sampled = sum(j["sampled_cpu_s"] for j in own if math.isfinite(j.get("sampled_cpu_s", math.nan)))
+        note += (f" ({sum(j['cpu_s'] for j in own):.1f} s; Snakemake's benchmark cpu_time, sampled every 30 s "
+                 f"after a job's first 30 s, has {sampled:.1f} s for them)")
+    if len(own) < len(jobs):
+        note += "; the others: Snakemake's sampled cpu_time, a lower bound for jobs longer than 30 s"
+    return note + "."
+
+
 def markdown(jobs: list[dict]) -> str:
     """The run-time table: per stage, then per rule, both sorted by total wall time."""
     total = sum(j["wall_s"] for j in jobs if math.isfinite(j["wall_s"]))
     lines = ["# Run time and memory per stage and per rule", "",
              f"From {len(jobs)} Snakemake benchmark files (results/benchmarks/<rule>/...): {total:.1f} job-seconds "
              "in all (the sum over jobs; the wall time of a parallel run is less). Peak RSS is the largest "
-             "resident memory of one job of the group.", ""]
+             "resident memory of one job of the group.", "", _cpu_note(jobs), ""]
     for by in ("stage", "rule"):
         rows = summarise(jobs, by)
         extra = " | stage" if by == "rule" else ""

@@ -79,6 +79,17 @@ def _now_ms() -> int:
     return int(time.time() * 1000)
 
 
+def process_cpu_seconds() -> float:
+    """User + system CPU seconds of this process (every thread) and of its finished children, since it started
+    (``getrusage``): the job's own CPU time, kept in its record as ``job.cpu_s``. Snakemake's benchmark
+    ``cpu_time`` is a sample, taken every second for 30 s and then every 30 s, so a longer job's last stretch is
+    missing from it."""
+    import resource
+
+    own, children = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+    return own.ru_utime + own.ru_stime + children.ru_utime + children.ru_stime
+
+
 class RunRecord:
     """What `child_run` yields: the same logging calls as an MLflow run, kept in memory and on disk."""
 
@@ -241,7 +252,8 @@ def child_run(record_path: str | Path, parent: str, run_name: str, *, rule: str,
 
     Tags: rule, wildcards, config hash, git commit, profile. The resolved config is kept as the
     artifact `config.yaml`. The record is written provisionally at the start (status RUNNING, with
-    ``job`` = {uid, pid, host} that identifies this attempt of the job) and finally with its real status.
+    ``job`` = {uid, pid, host} that identifies this attempt of the job) and finally with its real status and
+    ``job.cpu_s`` (`process_cpu_seconds` at the end).
     """
     path = Path(record_path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -280,6 +292,7 @@ def child_run(record_path: str | Path, parent: str, run_name: str, *, rule: str,
         raise
     finally:
         data["end_time"] = _now_ms()
+        data["job"]["cpu_s"] = round(process_cpu_seconds(), 3)
         record.write()
     if killed is not None:
         raise SystemExit(128 + killed.signum) from killed

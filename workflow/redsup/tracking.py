@@ -533,7 +533,8 @@ def sync_records(tracking_uri: str, plan: Mapping[str, Any], runs_root: str | Pa
     the store), which is deleted (MLflow's soft delete); a finished one is kept as history. Every child is
     tagged with the tables it serves (`table_memberships`; tags of superseded runs are removed) and carries
     its job's wall time, CPU time and peak RSS from the job's benchmark file
-    (`<runs_root>/../benchmarks/<rule>/...`, `redsup.benchmarks`). The parents of `table_ids` get the table
+    (`<runs_root>/../benchmarks/<rule>/...`, `redsup.benchmarks`; the CPU time from the record's own
+    ``job.cpu_s`` where it has one). The parents of `table_ids` get the table
     and figure files as artifacts (`results_root` = the folder above `runs_root`). One sync at a time
     (a file lock beside `out_json`). Returns (and writes to `out_json`) the registry plus counts.
     A record whose parent is not in the plan is imported under a parent created for it in stage `data`.
@@ -587,6 +588,9 @@ def _sync_records(tracking_uri, plan, runs_root: Path, out_json, *, artifact_roo
         bench = benchmark_path(path, data["tags"].get("redsup.rule", ""), runs_root=runs_root,
                                benchmark_root=results_root / "benchmarks")
         metrics = job_metrics(bench) if status != "RUNNING" and bench.is_file() else {}
+        own_cpu = (data.get("job") or {}).get("cpu_s")
+        if metrics and isinstance(own_cpu, (int, float)):   # the job's getrusage, not Snakemake's 30-s sample
+            metrics["job_cpu_s"] = float(own_cpu)
         end = data.get("end_time") or data["start_time"]
         stage = registry["parent_stages"][data["parent"]]
         parent_id = registry["parents"][data["parent"]]
