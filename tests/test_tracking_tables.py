@@ -49,7 +49,7 @@ def test_summary_per_rule_and_stage_sorted_by_total(tmp_path):
     _bench(root / "world_scene/raw/d/train_000.tsv", 10.0, 100.0, 9.0)
     _bench(root / "world_scene/raw/d/train_001.tsv", 30.0, 250.0, 29.0)
     _bench(root / "train_depth/depth/models/d/M.tsv", 25.0, 900.0, 48.0)
-    _bench(root / "table/tables/t.tsv", 1.0, 80.0, 1.0)
+    _bench(root / "table/tables/t_lr0.1.tsv", 1.0, 80.0, 1.0)
     _bench(root / "benchmark_summary/tables/run_time.tsv", 99.0, 1.0, 1.0)  # its own file: excluded
     stages = {"world_scene": "world", "train_depth": "depth", "table": "tables"}
     # train_001's run record has the job's own CPU seconds: they replace Snakemake's sampled 29.0
@@ -57,10 +57,12 @@ def test_summary_per_rule_and_stage_sorted_by_total(tmp_path):
     record.parent.mkdir(parents=True)
     record.write_text(json.dumps({"job": {"uid": "u", "cpu_s": 31.5}}))
     (tmp_path / "runs/raw/d/train_000.json").write_text(json.dumps({"job": {"uid": "v"}}))   # older: no cpu_s
+    (tmp_path / "runs/tables").mkdir(parents=True)   # a dot in the job's name is not a suffix
+    (tmp_path / "runs/tables/t_lr0.1.json").write_text(json.dumps({"job": {"uid": "w", "cpu_s": 1.25}}))
     jobs = benchmarks.collect(root, stages, exclude=("benchmark_summary",))
     assert len(jobs) == 4
-    assert [(j["job"], j["cpu_s"], j["cpu_source"]) for j in jobs if j["rule"] == "world_scene"] == \
-        [("raw/d/train_000", 9.0, "benchmark"), ("raw/d/train_001", 31.5, "job")]
+    assert [(j["job"], j["cpu_s"], j["cpu_source"]) for j in jobs if j["rule"] in ("world_scene", "table")] == \
+        [("tables/t_lr0.1", 1.25, "job"), ("raw/d/train_000", 9.0, "benchmark"), ("raw/d/train_001", 31.5, "job")]
     rules = benchmarks.summarise(jobs, "rule")
     assert [r["rule"] for r in rules] == ["world_scene", "train_depth", "table"]
     ws = rules[0]
@@ -74,8 +76,8 @@ def test_summary_per_rule_and_stage_sorted_by_total(tmp_path):
     text = md.read_text()
     assert "66.0 job-seconds" in text and "| world_scene | world | 2 | 40.0 | 60.6 % | 20.00 | 30.00 | 40.5 | 250.0 |" \
         in text
-    assert "for 1 of 4 jobs (31.5 s; Snakemake's benchmark cpu_time, sampled every 30 s after a job's first 30 s, " \
-        "has 29.0 s for them); the others: Snakemake's sampled cpu_time" in text
+    assert "for 2 of 4 jobs (32.8 s; Snakemake's benchmark cpu_time, sampled every 30 s after a job's first 30 s, " \
+        "has 30.0 s for them); the others: Snakemake's sampled cpu_time" in text
     assert text.index("| world |") < text.index("| depth |") < text.index("| tables |")
     assert png.stat().st_size > 5000
     with pytest.raises(ValueError, match="no benchmark files"):

@@ -89,7 +89,7 @@ def collect(root: str | Path, rule_stages: Mapping[str, str], exclude: tuple[str
             continue
         values = read_benchmark(path)
         job = path.relative_to(root / rule).with_suffix("")
-        own = record_cpu_seconds(runs / job.with_suffix(".json"))
+        own = record_cpu_seconds(runs / job.parent / f"{job.name}.json")   # names like "..._lr0.1" keep their dot
         jobs.append({"rule": rule, "stage": rule_stages.get(rule, "unknown"), "job": str(job),
                      "wall_s": values["s"], "max_rss_mb": values["max_rss"],
                      "cpu_s": own if math.isfinite(own) else values["cpu_time"],
