@@ -13,6 +13,7 @@ Torch-free and MLflow-free (imported by the tracking import and the summary job)
 from __future__ import annotations
 
 import csv
+import json
 import math
 from collections.abc import Mapping
 from pathlib import Path
@@ -63,8 +64,6 @@ def job_metrics(path: str | Path) -> dict[str, float]:
 def record_cpu_seconds(record_path: str | Path) -> float:
     """``job.cpu_s`` of a run record (the job's own getrusage CPU seconds, `redsup.runlog.child_run`); NaN where
     the record is missing, unreadable or older than that field."""
-    import json
-
     try:
         with open(record_path) as fh:
             value = (json.load(fh).get("job") or {}).get("cpu_s")
