@@ -195,7 +195,10 @@ def test_provisional_record_names_its_attempt(tmp_path):
         assert provisional["status"] == "RUNNING" and provisional["job"]["pid"] == os.getpid()
         run.log_metric("m", 1.0)
     final = json.loads((tmp_path / "r.json").read_text())
-    assert final["status"] == "FINISHED" and final["job"] == provisional["job"] and len(final["job"]["uid"]) == 32
+    # the same attempt; the final record adds the job's own CPU seconds (redsup.runlog.process_cpu_seconds)
+    assert "cpu_s" not in provisional["job"] and final["job"]["cpu_s"] > 0
+    assert final["status"] == "FINISHED" and {k: v for k, v in final["job"].items() if k != "cpu_s"} == \
+        provisional["job"] and len(final["job"]["uid"]) == 32
 
 
 def test_a_record_finishing_while_the_sync_reads_it_still_gets_its_artifacts(work, monkeypatch):
