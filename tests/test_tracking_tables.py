@@ -33,6 +33,9 @@ def test_read_benchmark_and_job_metrics(tmp_path):
     assert benchmarks.job_metrics(tmp_path / "b.tsv") == {"job_wall_s": 0.4, "job_cpu_s": 0.3}  # no NaN metric
     _bench(tmp_path / "z.tsv", 0.9, "0.00", 0.5)  # a job shorter than the sampler's first look: RSS not measured
     assert benchmarks.job_metrics(tmp_path / "z.tsv") == {"job_wall_s": 0.9, "job_cpu_s": 0.5}
+    # the job's own CPU seconds (its run record) replace the sampled 20.0; NaN or None keeps the sample
+    assert benchmarks.job_metrics(tmp_path / "a.tsv", 31.5)["job_cpu_s"] == 31.5
+    assert benchmarks.job_metrics(tmp_path / "a.tsv", math.nan)["job_cpu_s"] == 20.0
     assert math.isnan(benchmarks.read_benchmark(tmp_path / "z.tsv")["max_rss"])
     (tmp_path / "c.tsv").write_text(HEADER)
     with pytest.raises(ValueError, match="c.tsv"):
@@ -42,6 +45,9 @@ def test_read_benchmark_and_job_metrics(tmp_path):
 def test_benchmark_path_mirrors_the_run_record():
     assert benchmarks.benchmark_path("results/runs/raw/world_kitti/train_000.json", "world_scene") == \
         Path("results/benchmarks/world_scene/raw/world_kitti/train_000.tsv")
+    for record, rule in (("results/runs/raw/world_kitti/train_000.json", "world_scene"),
+                         ("results/runs/depth/eval/instance_M_lr0.1.json", "depth_eval")):   # a dot, not a suffix
+        assert benchmarks.record_path(benchmarks.benchmark_path(record, rule)) == Path(record)
 
 
 def test_summary_per_rule_and_stage_sorted_by_total(tmp_path):

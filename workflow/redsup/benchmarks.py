@@ -55,9 +55,21 @@ def benchmark_path(record_path: str | Path, rule: str, *, runs_root: str | Path 
     return Path(benchmark_root) / rule / rel.with_suffix(".tsv")
 
 
-def job_metrics(path: str | Path) -> dict[str, float]:
-    """MLflow metrics of one job from its benchmark file (measured, finite values only)."""
+def record_path(benchmark: str | Path, *, benchmark_root: str | Path = BENCHMARK_ROOT,
+                runs_root: str | Path = RUNS_ROOT) -> Path:
+    """The run record of the job that wrote benchmark file ``benchmark`` (the inverse of `benchmark_path`; a dot
+    in the job's name, as in ``..._lr0.1``, is not a suffix)."""
+    rel = Path(benchmark).relative_to(benchmark_root)
+    rel = rel.relative_to(rel.parts[0])   # below the rule's folder
+    return Path(runs_root) / rel.parent / f"{rel.stem}.json"
+
+
+def job_metrics(path: str | Path, cpu_s: float | None = None) -> dict[str, float]:
+    """MLflow metrics of one job from its benchmark file (measured, finite values only); ``cpu_s``, the job's own
+    CPU seconds from its run record where known, replaces the benchmark's sampled ``cpu_time``."""
     values = read_benchmark(path)
+    if cpu_s is not None and math.isfinite(cpu_s):
+        values["cpu_time"] = float(cpu_s)
     return {metric: values[col] for col, metric in METRIC_NAMES.items() if math.isfinite(values[col])}
 
 
@@ -88,7 +100,7 @@ def collect(root: str | Path, rule_stages: Mapping[str, str], exclude: tuple[str
             continue
         values = read_benchmark(path)
         job = path.relative_to(root / rule).with_suffix("")
-        own = record_cpu_seconds(runs / job.parent / f"{job.name}.json")   # names like "..._lr0.1" keep their dot
+        own = record_cpu_seconds(record_path(path, benchmark_root=root, runs_root=runs))
         jobs.append({"rule": rule, "stage": rule_stages.get(rule, "unknown"), "job": str(job),
                      "wall_s": values["s"], "max_rss_mb": values["max_rss"],
                      "cpu_s": own if math.isfinite(own) else values["cpu_time"],

@@ -587,10 +587,9 @@ def _sync_records(tracking_uri, plan, runs_root: Path, out_json, *, artifact_roo
         want = _table_tags(memberships.get(path, set()))
         bench = benchmark_path(path, data["tags"].get("redsup.rule", ""), runs_root=runs_root,
                                benchmark_root=results_root / "benchmarks")
-        metrics = job_metrics(bench) if status != "RUNNING" and bench.is_file() else {}
-        own_cpu = (data.get("job") or {}).get("cpu_s")
-        if metrics and isinstance(own_cpu, (int, float)):   # the job's getrusage, not Snakemake's 30-s sample
-            metrics["job_cpu_s"] = float(own_cpu)
+        own_cpu = (data.get("job") or {}).get("cpu_s")   # the job's getrusage, not Snakemake's 30-s sample
+        metrics = job_metrics(bench, own_cpu if isinstance(own_cpu, (int, float)) else None) \
+            if status != "RUNNING" and bench.is_file() else {}
         end = data.get("end_time") or data["start_time"]
         stage = registry["parent_stages"][data["parent"]]
         parent_id = registry["parents"][data["parent"]]
