@@ -8,6 +8,8 @@ tracks). Each variant changes one thing:
   clips are re-tracked with G into ``--workdir``;
 - ``--sigmas S ...``: Gaussian smoothing (frames) of the MLP-tracker's inputs at train and test time
   (``velocity.smoothing.tracker``), with the configured gate and with every gate given;
+- ``--features MODE ...``: the MLP's input (``velocity.mlp.features``: absolute, relative, relative_metric;
+  ``redsup.velocity.mlp.box_features``) on the build's tracks;
 - ``--train-clips DIR ...``: another training clip split (``DIR/calibration.txt``, ``DIR/clips/<n>/``, e.g. the
   build's clips plus more rendered the same way), tracked with the configured gate into ``--workdir``.
 
@@ -16,6 +18,7 @@ squared velocity error is averaged over the seeds, and ``redsup.velocity.compare
 variant's gain over the baseline with its paired, bin-stratified 95 % interval.
 
     python benchmarks/velocity_val_knobs.py --results results --gates 0.05 0.03 --sigmas 3
+    python benchmarks/velocity_val_knobs.py --results results --features absolute relative_metric
     python benchmarks/velocity_val_knobs.py --results results --train-clips /data/more/results/raw/clips/train
 """
 from __future__ import annotations
@@ -47,14 +50,16 @@ def tracks(clips_dir: Path, out: Path, medianflow_cfg: dict) -> Path:
     return out
 
 
-def val_errors(cfg: dict, train, val, sigma: float, seeds) -> np.ndarray:
-    """Per-vehicle squared val error of MLP-tracker, averaged over ``seeds``."""
+def val_errors(cfg: dict, train, val, sigma: float, seeds, features: str | None = None) -> np.ndarray:
+    """Per-vehicle squared val error of MLP-tracker (input ``features``, None: the configured), averaged over
+    ``seeds``."""
     v = cfg["velocity"]
     smoothing = {"tracker": {"train": sigma, "test": sigma}, "synthetic": {"train": 0.0, "test": 0.0}}
     conf = {"name": "val_knobs", "train_on": "tracker", "samples_factor": 1.0, "velocity_scale": 1.0}
     errs = []
     for seed in seeds:
-        _, pred, *_ = run_mlp(conf, dict(v["mlp"], timing_repeats=1), smoothing, v["synthetic"]["samples"],
+        mlp_cfg = dict(v["mlp"], timing_repeats=1, **({"features": features} if features else {}))
+        _, pred, *_ = run_mlp(conf, mlp_cfg, smoothing, v["synthetic"]["samples"],
                               train, {"val": val}, None, seed)
         errs.append(squared_error(pred["val"]["velocity"], val.velocity))
     return np.mean(errs, axis=0)
@@ -70,6 +75,7 @@ def main(argv=None) -> int:
     ap.add_argument("--workdir", default="results/velocity_val_knobs", help="re-tracked clips go here")
     ap.add_argument("--gates", nargs="*", type=float, default=[])
     ap.add_argument("--sigmas", nargs="*", type=float, default=[])
+    ap.add_argument("--features", nargs="*", default=[])
     ap.add_argument("--train-clips", nargs="*", default=[])
     ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     a = ap.parse_args(argv)
@@ -85,27 +91,28 @@ def main(argv=None) -> int:
     base_train = split(res / "prepared/clips/train/medianflow.npz", clips["train"])
     base_val = split(res / "prepared/clips/val/medianflow.npz", clips["val"])
     gate0 = mf["max_scale_step"]
-    variants = {f"gate {gate0} sigma {s}": (base_train, base_val, s) for s in a.sigmas}
+    variants = {f"gate {gate0} sigma {s}": (base_train, base_val, s, None) for s in a.sigmas}
+    variants.update({f"features {m}": (base_train, base_val, 0.0, m) for m in a.features})
     for g in a.gates:
         m = dict(copy.deepcopy(mf), max_scale_step=g)
         tr, va = (split(tracks(clips[s], work / f"gate{g}/{s}/medianflow.npz", m), clips[s]) for s in clips)
         for s in [0.0, *a.sigmas]:
-            variants[f"gate {g} sigma {s}"] = (tr, va, s)
+            variants[f"gate {g} sigma {s}"] = (tr, va, s, None)
     for d in a.train_clips:
         d = Path(d)
         key = hashlib.md5(str(d.resolve()).encode()).hexdigest()[:8]
         tr = split(tracks(d, work / f"train_{key}/medianflow.npz", mf), d)
-        variants[f"train {d} ({len(tr)} vehicles)"] = (tr, base_val, 0.0)
+        variants[f"train {d} ({len(tr)} vehicles)"] = (tr, base_val, 0.0, None)
     seeds = a.seeds
     base = val_errors(cfg, base_train, base_val, 0.0, seeds)
     per_bin = " / ".join(f"{base[base_val.bins == k].mean():.2f}" for k in range(3) if (base_val.bins == k).any())
     print(f"baseline (gate {gate0}, sigma 0, {len(base_train)} training vehicles): val E_v "
           f"{ratio_bootstrap(base, base, base_val.bins)['ev_a']:.3f} (near / medium / far {per_bin}) over "
           f"{len(base_val)} vehicles, seeds {seeds}", flush=True)
-    for name, (tr, va, s) in variants.items():
+    for name, (tr, va, s, features) in variants.items():
         if not np.array_equal(va.bins, base_val.bins):
             raise ValueError(f"{name}: the val vehicles differ from the baseline's")
-        e = val_errors(cfg, tr, va, s, seeds)
+        e = val_errors(cfg, tr, va, s, seeds, features)
         r = ratio_bootstrap(e, base, base_val.bins)
         per_bin = " / ".join(f"{e[base_val.bins == k].mean():.2f}" for k in range(3) if (base_val.bins == k).any())
         print(f"{name}: val E_v {r['ev_a']:.3f} (near / medium / far {per_bin}), gain over the baseline "

@@ -557,6 +557,11 @@ def test_relative_box_features_by_hand():
     # frame 1 minus the last, over the last height 0.1: x (-20 / 714) / 0.1, y (-0.01) / 0.1, w 0, h 0
     np.testing.assert_allclose(f[0, 4:8], [-20 / 714 / 0.1, -0.1, 0.0, 0.0], rtol=1e-5, atol=1e-7)
     np.testing.assert_allclose(f[0, -4:], 0.0, atol=1e-7)     # the last frame itself
+    g = mlp.box_features(boxes, CAL, 0.0, "relative_metric")
+    assert g.shape == (1, 28)
+    np.testing.assert_allclose(g[0, :16], f[0], rtol=1e-6)      # the relative features first, then ...
+    # ... frame 1's changes over the last height squared (0.1^2): x (-20 / 714) / 0.01, y (-0.01) / 0.01 = -1
+    np.testing.assert_allclose(g[0, 16:20], [-20 / 714 / 0.01, -1.0, 0.0, 0.0], rtol=1e-5, atol=1e-6)
     with pytest.raises(ValueError, match="mode"):
         mlp.box_features(boxes, CAL, 0.0, "polar")
 

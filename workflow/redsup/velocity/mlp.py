@@ -57,7 +57,7 @@ class VelocityMLP(nn.Module):
         return self.net((x - self.mean) / self.std)
 
 
-FEATURES = ("absolute", "relative")
+FEATURES = ("absolute", "relative", "relative_metric")
 
 
 def box_features(boxes: np.ndarray, calib: Calibration, sigma: float, mode: str = "absolute") -> np.ndarray:
@@ -67,7 +67,10 @@ def box_features(boxes: np.ndarray, calib: Calibration, sigma: float, mode: str 
     standardised box (4 values: where and how large the vehicle is) followed by every frame's change from
     the last box divided by the last box's standardised height (4T values: motion relative to the apparent
     size, the scale-free form of dZ / Z), so the motion is not a small difference of large, strongly
-    correlated inputs: (N, 4T + 4)."""
+    correlated inputs: (N, 4T + 4). mode "relative_metric": the relative features followed by every change divided
+    by the last standardised height once more (4T values: a box of height h = f H / Z changes by dh = -f H dZ / Z^2,
+    so dh / h^2 = -dZ / (f H), proportional to the metric displacement, the quantity v_z is linear in):
+    (N, 8T + 4)."""
     if mode not in FEATURES:
         raise ValueError(f"unknown box feature mode {mode!r} (have {FEATURES})")
     b = gaussian_smooth(boxes, sigma)
@@ -79,7 +82,10 @@ def box_features(boxes: np.ndarray, calib: Calibration, sigma: float, mode: str 
     last = norm[:, -1, :]
     scale = np.maximum(last[:, 3:4], 1e-4)[:, None, :]
     rel = (norm - last[:, None, :]) / scale
-    return np.concatenate([last, rel.reshape(n, T * 4)], axis=1).astype(np.float32)
+    parts = [last, rel.reshape(n, T * 4)]
+    if mode == "relative_metric":
+        parts.append((rel / scale).reshape(n, T * 4))
+    return np.concatenate(parts, axis=1).astype(np.float32)
 
 
 def velocity_loss(pred: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
