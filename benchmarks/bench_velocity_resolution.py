@@ -17,6 +17,8 @@ velocity costs when the relative velocity changes within the clip (``truth_diagn
     python benchmarks/bench_velocity_resolution.py --clips 40 --widths 320 640 --split val --truth
     python benchmarks/bench_velocity_resolution.py --clips 20 --widths 1280 --split val --truth \
         --foveate 1:0 4:48 4:48:32 --image-format png jpg      # foveated rendering (redsup.world.foveate), JPEG
+    python benchmarks/bench_velocity_resolution.py --clips 12 --widths 1280 --split val --truth --foveate 4:48 \
+        --image-format jpg png --pixel-noise 0.004 0                # sensor noise and JPEG against the size jitter
 
 ``--foveate F:M[:T]`` renders the cars' windows (grown by M px, then to the image's T-px tile grid) at full
 resolution and the rest on an F-times coarser grid (``velocity_clips.foveate``; 1:0 = every pixel cast); render
@@ -40,14 +42,14 @@ sys.path.insert(0, str(ROOT / "workflow"))
 from redsup import config as rconfig  # noqa: E402
 from redsup.prep.medianflow import write_medianflow  # noqa: E402
 from redsup.velocity.data import load_split  # noqa: E402
-from redsup.velocity.diagnosis import geometric_diagnosis, truth_diagnosis  # noqa: E402
+from redsup.velocity.diagnosis import geometric_diagnosis, scale_jitter, truth_diagnosis  # noqa: E402
 from redsup.velocity.metrics import BIN_NAMES  # noqa: E402
 from redsup.world.clips import true_distances, write_clips  # noqa: E402
 
 
 def measure(cfg: dict, width: int, split: str, clips: int, workdir: Path, supersample: int = 1,
             truth: bool = False, track_scales=(1.0,), trackers=({},), foveate=(1, 0),
-            image_format: str = "png") -> list[dict]:
+            image_format: str = "png", pixel_noise: float | None = None) -> list[dict]:
     """Render once, then track at each of ``track_scales`` (detection.medianflow.input_scale) with each of
     ``trackers`` (detection.medianflow.tracker: OpenCV MedianFlow parameters); one dict each."""
     ccfg = copy.deepcopy(cfg["velocity_clips"])
@@ -55,13 +57,15 @@ def measure(cfg: dict, width: int, split: str, clips: int, workdir: Path, supers
     ccfg["foveate"] = {"factor": int(foveate[0]), "margin_px": int(foveate[1]),
                        "tile_px": int(foveate[2]) if len(foveate) > 2 else 1}
     ccfg["image_format"] = image_format
+    world = dict(cfg["world"], pixel_noise=cfg["world"]["pixel_noise"] if pixel_noise is None else pixel_noise)
     base_w = ccfg["width"]
     ccfg["width"], ccfg["height"] = width, width * 9 // 16
     ccfg["min_visible_px"] = int(round(ccfg["min_visible_px"] * (width / base_w) ** 2))
     ccfg["splits"] = {split: {**ccfg["splits"][split], "clips": clips}}
-    out = workdir / f"w{width}_k{supersample}_f{'_'.join(str(v) for v in foveate)}_{image_format}"
+    out = workdir / (f"w{width}_k{supersample}_f{'_'.join(str(v) for v in foveate)}_{image_format}"
+                     f"_n{world['pixel_noise']:g}")
     t0, c0 = time.perf_counter(), time.process_time()
-    write_clips(cfg["world"], ccfg, split, cfg["seed"], out)
+    write_clips(world, ccfg, split, cfg["seed"], out)
     render_s, render_cpu = (time.perf_counter() - t0) / clips, (time.process_time() - c0) / clips
     rows = []
     for scale, tracker in ((s, t) for s in track_scales for t in trackers):
@@ -72,6 +76,11 @@ def measure(cfg: dict, width: int, split: str, clips: int, workdir: Path, supers
         t2 = time.perf_counter()
         tracks = load_split(npz, out, cfg["velocity"]["min_box_px"])
         d = geometric_diagnosis(tracks, float(ccfg["fps"]))
+        jitter = scale_jitter(tracks.boxes)
+        for b_i, b in enumerate(BIN_NAMES):   # the tracker's frame-to-frame size noise (benchmarks/bench_track_jitter.py)
+            ok = (tracks.bins == b_i) & ~tracks.tracker_failed & np.isfinite(jitter)
+            if ok.any():
+                d[f"jitter_{b}"] = float(np.median(jitter[ok]))
         if truth:   # the world's per-frame distances: what limits the tracks (redsup.velocity.diagnosis)
             distance = np.full(tracks.boxes.shape[:2], np.nan)
             for c in np.unique(tracks.clip):
@@ -80,7 +89,7 @@ def measure(cfg: dict, width: int, split: str, clips: int, workdir: Path, supers
             d.update(truth_diagnosis(tracks, distance, float(ccfg["fps"])))
         rows.append({**d, "render_s_per_clip": render_s, "render_cpu_s_per_clip": render_cpu,
                      "track_s_per_clip": (t2 - t1) / clips, "foveate": ":".join(str(v) for v in foveate),
-                     "image_format": image_format,
+                     "image_format": image_format, "pixel_noise": world["pixel_noise"],
                      "vehicles": len(tracks), "failed": int(tracks.tracker_failed.sum()), "track_scale": scale,
                      "tracker": ",".join(f"{k}={v}" for k, v in tracker.items()) or "defaults"})
     return rows
@@ -111,6 +120,8 @@ def main(argv=None) -> None:
                         "cast; tile_px 1 unless given)")
     p.add_argument("--image-format", nargs="+", default=["png"], choices=["png", "jpg"],
                    help="frame files (jpg at velocity_clips.jpeg_quality)")
+    p.add_argument("--pixel-noise", nargs="+", type=float, default=[None],
+                   help="world.pixel_noise values (sensor noise std, fraction of full scale); default: the config's")
     args = p.parse_args(argv)
     foveates = [tuple(int(v) for v in f.split(":")) for f in args.foveate]
     cfg = rconfig.load(args.config)
@@ -118,31 +129,35 @@ def main(argv=None) -> None:
                 else cfg["detection"]["medianflow"].get("tracker", {}) for t in args.trackers]
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
-        for w, k, fov, fmt in ((w, k, f, m) for w in args.widths for k in args.supersample for f in foveates
-                               for m in args.image_format):
+        for w, k, fov, fmt, noise in ((w, k, f, m, n) for w in args.widths for k in args.supersample
+                                      for f in foveates for m in args.image_format for n in args.pixel_noise):
             for r in measure(cfg, w, args.split, args.clips, Path(tmp), k, args.truth, args.track_scales,
-                             trackers, fov, fmt):
+                             trackers, fov, fmt, noise):
                 rows.append((w, k, r))
-                print(f"{w} x {w * 9 // 16}, {k} x {k} rays per pixel, foveate {r['foveate']}, {fmt}, tracked at "
+                print(f"{w} x {w * 9 // 16}, {k} x {k} rays per pixel, foveate {r['foveate']}, {fmt}, pixel noise "
+                      f"{r['pixel_noise']:g}, tracked at "
                       f"x{r['track_scale']:g} ({r['tracker']}): "
                       f"{r['vehicles']} vehicles ({r['failed']} tracker failures), render "
                       f"{r['render_s_per_clip']:.2f} s / clip ({r['render_cpu_s_per_clip']:.2f} CPU-s), tracking "
                       f"{r['track_s_per_clip']:.2f} s / clip", flush=True)
     print(f"\n{args.split} split, first {args.clips} clips; per bin near / medium / far\n")
-    print("| width | rays per pixel | foveate | frames | render CPU-s / clip | tracker input scale | MedianFlow | "
-          "vehicles | last tracked box (px, median) | corr(size-change v_z, true v_z) | box bottom motion over the "
-          "clip (px, median) |")
-    print("|---:|---:|---|---|---:|---:|---|---:|---|---|---|")
+    print("| width | rays per pixel | foveate | frames | pixel noise | render CPU-s / clip | tracker input scale | "
+          "MedianFlow | vehicles | last tracked box (px, median) | corr(size-change v_z, true v_z) | box bottom "
+          "motion over the clip (px, median) | size jitter (median, `scale_jitter`) |")
+    print("|---:|---:|---|---|---:|---:|---:|---|---:|---|---|---|---|")
     for w, k, r in rows:
-        print(f"| {w} | {k} x {k} | {r['foveate']} | {r['image_format']} | {r['render_cpu_s_per_clip']:.2f} | "
-              f"{r['track_scale']:g} | {r['tracker']} | {r['vehicles']} | {per_bin(r, 'box_px', '.1f')} | "
-              f"{per_bin(r, 'scale_corr', '.2f')} | {per_bin(r, 'motion_px', '.2f')} |")
+        print(f"| {w} | {k} x {k} | {r['foveate']} | {r['image_format']} | {r['pixel_noise']:g} | "
+              f"{r['render_cpu_s_per_clip']:.2f} | {r['track_scale']:g} | {r['tracker']} | {r['vehicles']} | "
+              f"{per_bin(r, 'box_px', '.1f')} | {per_bin(r, 'scale_corr', '.2f')} | {per_bin(r, 'motion_px', '.2f')} | "
+              f"{per_bin(r, 'jitter', '.4f')} |")
     if args.truth:
-        print("\n| width | rays per pixel | foveate | frames | tracker input scale | MedianFlow | std of the true size "
-              "ratio s_(T-1) / s_1 | std of the tracker's error on it | E_v floor of the clip-mean v_z (m^2/s^2) |")
-        print("|---:|---:|---|---|---:|---|---|---|---|")
+        print("\n| width | rays per pixel | foveate | frames | pixel noise | tracker input scale | MedianFlow | std of "
+              "the true size ratio s_(T-1) / s_1 | std of the tracker's error on it | E_v floor of the clip-mean v_z "
+              "(m^2/s^2) |")
+        print("|---:|---:|---|---|---:|---:|---|---|---|---|")
         for w, k, r in rows:
-            print(f"| {w} | {k} x {k} | {r['foveate']} | {r['image_format']} | {r['track_scale']:g} | {r['tracker']} | "
+            print(f"| {w} | {k} x {k} | {r['foveate']} | {r['image_format']} | {r['pixel_noise']:g} | "
+                  f"{r['track_scale']:g} | {r['tracker']} | "
                   f"{per_bin(r, 'ratio_signal', '.3f')} | {per_bin(r, 'ratio_noise', '.3f')} | "
                   f"{per_bin(r, 'accel_floor', '.2f')} |")
 

@@ -462,6 +462,25 @@ def test_scale_signal_by_hand():
     assert jittered["scale_corr_far"] < exact["scale_corr_far"] - 0.05
 
 
+def test_scale_jitter_by_hand():
+    """The std of log size around its polynomial fit: 0 for a size that changes smoothly, 0.01 for one that
+    alternates between 10 and 10 e^0.02 about its mean (degree 0), NaN for a box without area."""
+    from redsup.velocity.diagnosis import scale_jitter
+
+    t = np.arange(6.0)
+    smooth = 10 * np.exp(0.03 * t - 0.002 * t ** 2)                 # log size quadratic in t: nothing left
+    alternating = 10 * np.exp(0.02 * (t % 2))                        # log s - log 10 = 0, 0.02, 0, ... (mean 0.01)
+    boxes = np.zeros((3, 6, 4))
+    boxes[0, :, 2] = boxes[0, :, 3] = smooth
+    boxes[1, :, 2] = boxes[1, :, 3] = alternating
+    boxes[2, :, 2:] = 5.0
+    boxes[2, 3, 2] = 0.0
+    j = scale_jitter(boxes)
+    assert j[0] == pytest.approx(0.0, abs=1e-9) and np.isnan(j[2])
+    assert scale_jitter(boxes[1:2], degree=0)[0] == pytest.approx(0.01)
+    assert 0.0 < j[1] < 0.01                                         # a quadratic absorbs a little of it
+
+
 def test_truth_diagnosis_by_hand():
     """Per bin, by hand (T = 4 frames at 1 fps, t = 2 s): the v_z term paid by the clip's mean velocity, the
     spread of the true size ratio Z_1 / Z_3, and the tracker's error on it (failed tracks left out)."""
