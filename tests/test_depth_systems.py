@@ -61,6 +61,11 @@ def test_decay_at_several_fractions():
                    lr=1e-3, decay_at=[0.25, 0.5], gamma=0.5, seed=0,
                    criterion=featdepth.FeatDepthLoss(noise_std=0.0), callback=lambda s, t: lrs.append(t["lr"]))
     assert lrs == pytest.approx([1e-3, 5e-4, 2.5e-4, 2.5e-4])
+    lrs.clear()                                   # decay_at 1: after every step, i.e. never
+    training.train(featdepth.build_models(base_channels=4), [_seq()], ["prev", "next"], steps=3, batch_size=2,
+                   lr=1e-3, decay_at=1.0, gamma=0.5, seed=0,
+                   criterion=featdepth.FeatDepthLoss(noise_std=0.0), callback=lambda s, t: lrs.append(t["lr"]))
+    assert lrs == pytest.approx([1e-3, 1e-3, 1e-3])
 
 
 @pytest.mark.parametrize("system", ["manydepth", "featdepth", "monodepth2"])
@@ -130,8 +135,8 @@ def test_train_settings_override_per_system():
 
 
 def test_train_settings_mode_recipe_between_base_and_model_entry():
-    """A mode's input_scale / steps / lr override depth.model / depth.train; a models entry's steps override the
-    mode's."""
+    """A mode's input_scale / steps / lr / decay_at override depth.model / depth.train; a models entry's steps
+    override the mode's."""
     cfg = {"model": {"base_channels": 16, "num_scales": 4, "min_depth": 0.1, "max_depth": 100.0},
            "train": {"steps": 600, "batch_size": 4, "lr": 1e-4, "decay_at": 0.75, "gamma": 0.1},
            "modes": {"M": {"sources": ["prev", "next"], "cameras": ["cam_front"], "input_scale": 0.5, "steps": 2400,
@@ -145,6 +150,9 @@ def test_train_settings_mode_recipe_between_base_and_model_entry():
     assert train_settings(cfg, "b", "M")[1]["steps"] == 30
     model, train = train_settings(cfg, "a", "S")
     assert model.get("input_scale", 1.0) == 1.0 and train["steps"] == 600 and train["lr"] == 1e-4
+    assert train["decay_at"] == 0.75
+    cfg["modes"]["M"]["decay_at"] = 1.0        # never: lr stays 3e-4 for all 2400 steps
+    assert train_settings(cfg, "a", "M")[1]["decay_at"] == 1.0
 
 
 def test_a_mode_may_select_its_best_validation_pass():
