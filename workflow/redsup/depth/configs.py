@@ -141,9 +141,10 @@ def train_epochs(depth_cfg: Mapping, mode: str) -> int:
 
 def train_settings(depth_cfg: Mapping, dataset: str, mode: str) -> tuple[dict, dict]:
     """(model settings, training settings) of one model: ``depth.model`` / ``depth.train`` overridden by the
-    system's ``depth.systems.<system>``, then by the mode's ``input_scale`` / ``steps`` / ``lr`` / ``decay_at`` and then by the
-    model entry's ``steps``; ``automask_after`` is the mode's (default 0). The model settings name the ``system``; the training settings hold ``epochs``
-    (validation passes, the best one kept; 0 = none: ``train_epochs``)."""
+    system's ``depth.systems.<system>``, then by the mode's ``input_scale`` / ``steps`` / ``lr`` / ``decay_at`` and
+    then by the model entry's ``steps``; ``automask_after`` is the mode's (default 0). The model settings name the
+    ``system``; the training settings hold ``epochs`` (validation passes, the best one kept; 0 = none:
+    ``train_epochs``)."""
     system = system_of(depth_cfg, mode)
     sset = system_settings(depth_cfg, system)
     mode_cfg = depth_cfg["modes"][mode]
