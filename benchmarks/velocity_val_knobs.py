@@ -11,7 +11,9 @@ tracks). Each variant changes one thing:
 - ``--features MODE ...``: the MLP's input (``velocity.mlp.features``: absolute, relative, relative_metric;
   ``redsup.velocity.mlp.box_features``) on the build's tracks;
 - ``--train-clips DIR ...``: another training clip split (``DIR/calibration.txt``, ``DIR/clips/<n>/``, e.g. the
-  build's clips plus more rendered the same way), tracked with the configured gate into ``--workdir``.
+  build's clips plus more rendered the same way), tracked with the configured gate into ``--workdir``;
+- ``--rendered TRAIN VAL``: the build's train and val clips rendered another way (the same clips and vehicles,
+  e.g. another ``velocity_clips.foveate`` setting), both tracked with the configured gate into ``--workdir``.
 
 Every variant trains ``--seeds`` MLPs (the configured recipe, epoch kept on val as in the build); per vehicle the
 squared velocity error is averaged over the seeds, and ``redsup.velocity.compare.ratio_bootstrap`` gives the
@@ -50,6 +52,12 @@ def tracks(clips_dir: Path, out: Path, medianflow_cfg: dict) -> Path:
     return out
 
 
+def tracked_dir(d: str | Path, work: Path, medianflow_cfg: dict) -> Path:
+    """MedianFlow tracks of the clip split in ``d``, cached in ``work`` under a name of its path."""
+    key = hashlib.md5(str(Path(d).resolve()).encode()).hexdigest()[:8]
+    return tracks(Path(d), work / f"clips_{key}/medianflow.npz", medianflow_cfg)
+
+
 def val_errors(cfg: dict, train, val, sigma: float, seeds, features: str | None = None) -> np.ndarray:
     """Per-vehicle squared val error of MLP-tracker (input ``features``, None: the configured), averaged over
     ``seeds``."""
@@ -77,6 +85,7 @@ def main(argv=None) -> int:
     ap.add_argument("--sigmas", nargs="*", type=float, default=[])
     ap.add_argument("--features", nargs="*", default=[])
     ap.add_argument("--train-clips", nargs="*", default=[])
+    ap.add_argument("--rendered", nargs=2, action="append", default=[], metavar=("TRAIN", "VAL"))
     ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     a = ap.parse_args(argv)
     torch.set_num_threads(1)
@@ -100,9 +109,11 @@ def main(argv=None) -> int:
             variants[f"gate {g} sigma {s}"] = (tr, va, s, None)
     for d in a.train_clips:
         d = Path(d)
-        key = hashlib.md5(str(d.resolve()).encode()).hexdigest()[:8]
-        tr = split(tracks(d, work / f"train_{key}/medianflow.npz", mf), d)
+        tr = split(tracked_dir(d, work, mf), d)
         variants[f"train {d} ({len(tr)} vehicles)"] = (tr, base_val, 0.0, None)
+    for pair in a.rendered:
+        tr, va = (split(tracked_dir(d, work, mf), Path(d)) for d in pair)
+        variants[f"rendered {pair[0]} + {pair[1]}"] = (tr, va, 0.0, None)
     seeds = a.seeds
     base = val_errors(cfg, base_train, base_val, 0.0, seeds)
     per_bin = " / ".join(f"{base[base_val.bins == k].mean():.2f}" for k in range(3) if (base_val.bins == k).any())

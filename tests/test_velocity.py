@@ -592,9 +592,14 @@ def test_table_caption_states_the_render_and_the_epoch_kept():
     cfg = rconfig.load(Path(__file__).resolve().parents[1] / "config.yaml", {"profile": "default"})
     tcfg = cfg["velocity"]["tables"]["mccraith_ch3_table2"]
     note = table_note(cfg, tcfg)
+    plain = copy.deepcopy(cfg)
+    plain["velocity_clips"]["foveate"]["car_rays_across"] = 0
     assert "embedded clips rendered at 1280 x 720 px, 1 x 1 ray per pixel (TuSimple: 1280 x 720), foveated (the cars " \
            "and 48 px around them cast at full resolution, the rest 4x coarser and upsampled), JPEG frames at " \
-           "quality 80" in note
+           "quality 80" in table_note(plain, tcfg)
+    plain["velocity_clips"]["foveate"].update(car_rays_across=64, car_max_rays=4)
+    assert "the rest 4x coarser and upsampled; over every car k x k rays a pixel, k = ceil(64 / its width in px) up " \
+           "to 4), JPEG" in table_note(plain, tcfg)
     tiled = copy.deepcopy(cfg)
     tiled["velocity_clips"]["foveate"]["tile_px"] = 32
     assert "cast at full resolution on a fixed 32-px tile grid, the rest 4x coarser" in table_note(tiled, tcfg)

@@ -12,11 +12,12 @@ import pytest
 from redsup import config
 from redsup.world.clips import annotate, clip_camera, clip_motorway, write_clips
 from redsup.world.common import derive_rng, pose
-from redsup.world.foveate import car_windows, coarse_camera, crop_camera, merge_rects, render_foveated, snap_rect
+from redsup.world.foveate import (car_sampling, car_windows, coarse_camera, crop_camera, merge_rects,
+                                  radiance_foveated, render_foveated, snap_rect)
 from redsup.world.gt import own_pixels
 from redsup.world.motorway import motorway_state
 from redsup.world.prims import car_prims
-from redsup.world.sensors import R_VEHICLE_FRONT, Camera, intrinsics
+from redsup.world.sensors import R_VEHICLE_FRONT, Camera, fine_camera, intrinsics
 from redsup.world.shade import SceneView, radiance, render_camera
 from redsup.world.textures import SKY
 
@@ -73,6 +74,65 @@ def test_merge_rects_by_hand():
     assert merge_rects([(0, 2, 0, 2), (3, 5, 3, 5), (1, 4, 1, 4)]) == [(0, 5, 0, 5)]
     assert merge_rects([(0, 2, 0, 2), (2, 4, 0, 2)]) == [(0, 2, 0, 2), (2, 4, 0, 2)]
     assert merge_rects([(3, 3, 0, 5)]) == []                # empty
+    # extra integers after the bounds: a merged rectangle keeps their maximum, an unmerged one its own
+    assert merge_rects([(0, 2, 0, 2, 3), (1, 3, 1, 3, 2), (5, 6, 5, 6, 1)]) == [(0, 3, 0, 3, 3), (5, 6, 5, 6, 1)]
+
+
+def _two_cars(cfg):
+    """A 320 x 180 camera 1.8 m above a flat road, a car 1.6 m wide 10 m ahead and one 40 m ahead, 8 m left."""
+    size = np.array([[3.9, 1.6, 1.5], [3.9, 1.6, 1.5]])
+    view = flat_view(cfg, cars=car_table(size))
+    prims = car_prims([[10.0 + 1.95, 0.0, 0.0], [40.0 + 1.95, 8.0, 0.0]], np.stack([np.eye(3)] * 2), size,
+                      np.array([0, 1]))
+    cam = Camera("cam_front", intrinsics(320, 180, 83.7), 320, 180, pose(R_VEHICLE_FRONT, [0.0, 0.0, 1.8]))
+    return view, prims, cam
+
+
+def test_car_sampling_by_hand(cfg):
+    """f = 160 / tan(41.85 deg) = 178.6 px: the near car's rear, 1.6 m wide at 10 m, is 28.6 px wide, the far one's
+    7.1 px at 40 m, plus the side it shows and the pixel rectangle's padding (``Camera.rects``: floor(u_lo - 0.5) to floor(u_hi + 0.5) + 2, up to 4 px).
+    rays_across 64: k = ceil(64 / the width), so the near car (32 px) gets 2 and the far one (13 px) 5, at most
+    max_rays; with rays_across 24 the near car needs one ray a pixel and is left out."""
+    view, prims, cam = _two_cars(cfg)
+    T = cam.T_vehicle_sensor
+    f = cam.K[0, 0]
+    assert f == pytest.approx(160 / np.tan(np.radians(83.7 / 2)))
+    rects = car_sampling(cam, T, prims, 100.0, 64, 8)
+    assert len(rects) == 2
+    far, near = sorted(rects, key=lambda r: r[3] - r[2])
+    assert 1.6 * f / 10 <= near[3] - near[2] <= 1.6 * f / 10 + 4      # straight ahead: the rear face only
+    assert 1.6 * f / 40 <= far[3] - far[2] <= 1.6 * f / 40 + 0.2 * 3.9 * f / 40 + 4   # and a little of its side
+    assert near[4] == -(-64 // (near[3] - near[2])) == 2
+    assert far[4] == -(-64 // (far[3] - far[2])) and far[4] > 4
+    assert sorted(car_sampling(cam, T, prims, 100.0, 64, 4)) == sorted([(*near[:4], 2), (*far[:4], 4)])
+    assert car_sampling(cam, T, prims, 100.0, 24, 4) == [(*far[:4], 2)]     # ceil(24 / 13 px)
+    assert car_sampling(cam, T, prims, 5.0, 64, 4) == []      # nothing within 5 m
+
+
+def test_car_sampling_colour_is_the_supersampled_render(cfg):
+    """rays_across > 0: inside each car's rectangle the linear colour is the k x k supersampled full render's
+    (``render_camera``'s average over the fine grid), everywhere else the one-ray foveated render's; label,
+    instance and depth stay the one-ray ones, so the annotations do not change."""
+    view, prims, cam = _two_cars(cfg)
+    T = cam.T_vehicle_sensor
+    look = cfg["world"]["domains"]["kitti_like"]["appearance"]
+    one = radiance_foveated(cam, T, prims, view, look, 100.0, 500.0, 4, 8)
+    ss = radiance_foveated(cam, T, prims, view, look, 100.0, 500.0, 4, 8, rays_across=64, max_rays=3)
+    for k in ("label", "instance", "depth"):
+        assert np.array_equal(ss[k], one[k]), k
+    lin_one, lin_ss = one["linear"].reshape(180, 320, 3), ss["linear"].reshape(180, 320, 3)
+    inside = np.zeros((180, 320), bool)
+    rects = car_sampling(cam, T, prims, 100.0, 64, 3)
+    assert sorted(r[4] for r in rects) == [2, 3]             # the near car 2 x 2 rays, the far one 3 x 3
+    for r0, r1, c0, c1, k in rects:
+        inside[r0:r1, c0:c1] = True
+        ref = radiance(cam_fine := fine_camera(cam, k), T, prims, view, look, 100.0, 500.0)["linear"]
+        ref = ref.reshape(cam_fine.height // k, k, cam_fine.width // k, k, 3).mean(axis=(1, 3))
+        hit = (one["label"] != SKY)[r0:r1, c0:c1]
+        assert np.allclose(lin_ss[r0:r1, c0:c1][hit], ref[r0:r1, c0:c1][hit], atol=1e-5)
+        edge = np.abs(lin_ss[r0:r1, c0:c1] - lin_one[r0:r1, c0:c1]).max(axis=-1) > 0.02
+        assert 0 < edge.mean() < 0.6          # the outline and the glass differ, the flat paint does not
+    assert np.array_equal(lin_ss[~inside], lin_one[~inside])
 
 
 def _clip_cfg(cfg):

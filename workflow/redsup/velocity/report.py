@@ -153,7 +153,10 @@ def table_note(config: dict, table_cfg: dict, results: dict | None = None) -> st
                      f"ray{'s' if k > 1 else ''} per pixel (TuSimple: 1280 x 720)"
                      + (f", foveated (the cars and {fov['margin_px']} px around them cast at full resolution"
                         + (f" on a fixed {fov['tile_px']}-px tile grid" if fov.get("tile_px", 1) > 1 else "")
-                        + f", the rest {fov['factor']}x coarser and upsampled)" if fov["factor"] > 1 else "")
+                        + f", the rest {fov['factor']}x coarser and upsampled"
+                        + (f"; over every car k x k rays a pixel, k = ceil({fov['car_rays_across']} / its width in px) "
+                           f"up to {fov.get('car_max_rays', 1)}" if fov.get("car_rays_across", 0) > 0 else "")
+                        + ")" if fov["factor"] > 1 else "")
                      + (f", JPEG frames at quality {clips.get('jpeg_quality', 80)} (as TuSimple's)"
                         if clips.get("image_format") == "jpg" else ""))
     if "rows" in table_cfg:

@@ -116,7 +116,8 @@ def render_clip(world_cfg: dict, clips_cfg: dict, split: str, seed: int, c: int,
         T_wc = state.T_world_vehicle @ cam.T_vehicle_sensor
         args = (cam, T_wc, state.prims, view, dom["appearance"], world_cfg["pixel_noise"],
                 clips_cfg["render_distance"], world_cfg["fog_distance"], rng)
-        out = (render_foveated(*args, factor=fov["factor"], margin=fov["margin_px"], tile=fov["tile_px"])
+        out = (render_foveated(*args, factor=fov["factor"], margin=fov["margin_px"], tile=fov["tile_px"],
+                               rays_across=fov.get("car_rays_across", 0), max_rays=fov.get("car_max_rays", 1))
                if fov["factor"] > 1
                else render_camera(*args, supersample=supersample))
         path = folder / "imgs" / f"{i + 1:03d}.{fmt}"

@@ -1,0 +1,174 @@
+"""How much of MLP-tracker's velocity error is the tracker's: the MLP trained and scored on the world's true boxes
+against MedianFlow's (run by hand, not a test; issue 11 §2: MLP-tracker against the constant predictor).
+
+For every annotated vehicle of a finished build's train and val clip splits the clip's motorway is rebuilt from
+its seed (nothing is rendered) and the vehicle's true box in every frame is the projection of its body and cabin
+(``true_boxes``: the full silhouette's bounds, occlusion ignored). Prints, per distance bin of val:
+
+- the tracker's error on the apparent size against the truth, both taken relative to the last frame (where the
+  tracker starts from the annotated box): its std at the first frame (the drift over the clip, what a velocity
+  estimate from the size change sees) and the std of its frame-to-frame steps;
+- MLP-tracker's val E_v (the configured recipe, ``--seeds``, the epoch kept on val) trained and scored on the
+  tracked boxes (the build's), on the true boxes, and on the true boxes with a random walk of the measured step
+  size added (``--walk``), against the constant predictor (training-mean velocity);
+  with paired, bin-stratified 95 % intervals (``redsup.velocity.compare.ratio_bootstrap``).
+
+Never reads the test split.
+
+    python benchmarks/velocity_oracle.py --results results
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "workflow"))
+
+from redsup import config as rconfig  # noqa: E402
+from redsup.velocity.compare import ratio_bootstrap  # noqa: E402
+from redsup.velocity.data import TrackSet, load_split  # noqa: E402
+from redsup.velocity.experiment import run_constant, run_mlp  # noqa: E402
+from redsup.velocity.metrics import squared_error  # noqa: E402
+from redsup.world.clips import clip_camera, clip_motorway  # noqa: E402
+from redsup.world.common import rotate  # noqa: E402
+from redsup.world.motorway import motorway_state  # noqa: E402
+from redsup.world.prims import CAR_KINDS  # noqa: E402
+from redsup.world.sensors import box_corners  # noqa: E402
+
+BINS = ("near", "medium", "far")
+
+
+def true_boxes(world_cfg: dict, clips_cfg: dict, split: str, seed: int, clip: int, track_ids) -> np.ndarray:
+    """(len(track_ids), frames, 4) x, y, w, h (px) of the projected body and cabin of the given vehicles of clip
+    ``clip`` (1-based) in every frame, clipped to the image."""
+    mw, _ = clip_motorway(world_cfg, clips_cfg, split, seed, clip - 1)
+    cam = clip_camera(world_cfg, clips_cfg)
+    index = {int(t): k for k, t in enumerate(mw.cars["track_id"])}
+    rows = [index[int(t)] for t in track_ids]
+    out = np.zeros((len(rows), clips_cfg["frames"], 4))
+    for i in range(clips_cfg["frames"]):
+        state = motorway_state(mw, i)
+        T_cw = np.linalg.inv(state.T_world_vehicle @ cam.T_vehicle_sensor)
+        p = state.prims
+        for j, k in enumerate(rows):
+            sel = np.isin(p.kind, CAR_KINDS) & (p.ent == k)
+            corners = box_corners(p.center[sel], p.rot[sel], p.half[sel])
+            corners = rotate(corners.reshape(-1, 3), T_cw[:3, :3]).reshape(1, -1, 3) + T_cw[:3, 3]
+            u0, u1, v0, v1, _ = cam.project_bounds(corners)
+            u0, u1 = np.clip([u0[0], u1[0]], -0.5, cam.width - 0.5)
+            v0, v1 = np.clip([v0[0], v1[0]], -0.5, cam.height - 0.5)
+            out[j, i] = (u0, v0, u1 - u0, v1 - v0)
+    return out
+
+
+def oracle_split(cfg: dict, split: str, tracks: TrackSet) -> TrackSet:
+    boxes = np.zeros_like(tracks.boxes)
+    for c in np.unique(tracks.clip):
+        m = tracks.clip == c
+        boxes[m] = true_boxes(cfg["world"], cfg["velocity_clips"], split, cfg["seed"], int(c), tracks.track_id[m])
+    out = tracks.subset(np.ones(len(tracks), bool))
+    out.boxes = boxes                     # the same vehicles train (tracker_failed kept) for a paired comparison
+    out.failed_frames = np.zeros(boxes.shape[:2], bool)
+    return out
+
+
+def log_size(boxes: np.ndarray) -> np.ndarray:
+    return 0.5 * np.log(np.clip(boxes[..., 2], 1e-3, None) * np.clip(boxes[..., 3], 1e-3, None))
+
+
+def with_walk(tracks: TrackSet, step: np.ndarray, rng: np.random.Generator) -> TrackSet:
+    """``tracks`` with a random walk in log size (std ``step[bin]`` a frame) ending at 0 at the last frame, the
+    box scaled about its centre."""
+    n, T = tracks.boxes.shape[:2]
+    s = rng.standard_normal((n, T - 1)) * step[tracks.bins][:, None]
+    walk = np.concatenate([np.cumsum(s[:, ::-1], axis=1)[:, ::-1], np.zeros((n, 1))], axis=1)
+    out = tracks.subset(np.ones(n, bool))
+    b = tracks.boxes.copy()
+    f = np.exp(walk)
+    cx, cy = b[..., 0] + b[..., 2] / 2, b[..., 1] + b[..., 3] / 2
+    b[..., 2] *= f
+    b[..., 3] *= f
+    b[..., 0], b[..., 1] = cx - b[..., 2] / 2, cy - b[..., 3] / 2
+    out.boxes = b
+    return out
+
+
+def val_errors(cfg: dict, train: TrackSet, val: TrackSet, seeds) -> np.ndarray:
+    v = cfg["velocity"]
+    smoothing = {"tracker": {"train": 0.0, "test": 0.0}, "synthetic": {"train": 0.0, "test": 0.0}}
+    conf = {"name": "oracle", "train_on": "tracker", "samples_factor": 1.0, "velocity_scale": 1.0}
+    errs = []
+    for seed in seeds:
+        _, pred, *_ = run_mlp(conf, dict(v["mlp"], timing_repeats=1), smoothing, v["synthetic"]["samples"],
+                              train, {"val": val}, None, seed)
+        errs.append(squared_error(pred["val"]["velocity"], val.velocity))
+    return np.mean(errs, axis=0)
+
+
+def per_bin(e: np.ndarray, bins: np.ndarray) -> str:
+    return " / ".join(f"{e[bins == k].mean():.2f}" for k in range(3) if (bins == k).any())
+
+
+def ev(e: np.ndarray, bins: np.ndarray) -> float:
+    """E_v as the tables give it: the mean of the distance bins' means."""
+    return float(np.mean([e[bins == k].mean() for k in range(3) if (bins == k).any()]))
+
+
+def main(argv=None) -> int:
+    import torch
+
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--config", default=str(ROOT / "config.yaml"))
+    ap.add_argument("--profile", default="default")
+    ap.add_argument("--results", default="results", help="a finished build's results folder")
+    ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
+    ap.add_argument("--walk", action="store_true", help="also the true boxes plus the measured random walk")
+    a = ap.parse_args(argv)
+    torch.set_num_threads(1)
+    cfg = rconfig.load(a.config, {"profile": a.profile})
+    res = Path(a.results)
+    min_px = cfg["velocity"]["min_box_px"]
+    tracked = {s: load_split(res / f"prepared/clips/{s}/medianflow.npz", res / f"raw/clips/{s}", min_px)
+               for s in ("train", "val")}
+    oracle = {s: oracle_split(cfg, s, t) for s, t in tracked.items()}
+    val = tracked["val"]
+    ok = val.usable
+    err = log_size(val.boxes) - log_size(val.boxes[:, -1:]) - (log_size(oracle["val"].boxes)
+                                                                 - log_size(oracle["val"].boxes[:, -1:]))
+    step = np.zeros(3)
+    print(f"tracker's log-size error against the truth (val, {int(ok.sum())} of {len(val)} vehicles tracked "
+          "without failure), relative to the last frame:")
+    for k, name in enumerate(BINS):
+        m = ok & (val.bins == k)
+        if not m.any():
+            continue
+        steps = np.diff(err[m], axis=1)
+        step[k] = float(np.std(steps))
+        true_change = log_size(oracle["val"].boxes[m, 0]) - log_size(oracle["val"].boxes[m, -1])
+        print(f"  {name}: {int(m.sum())} vehicles, last box {np.median(val.boxes[m, -1, 2]):.0f} px wide; drift "
+              f"over the clip (std at the first frame) {np.std(err[m, 0]):.4f}, step std {step[k]:.4f} "
+              f"(x sqrt(39) = {step[k] * np.sqrt(39):.4f}), lag-1 autocorrelation of steps "
+              f"{np.corrcoef(steps[:, 1:].ravel(), steps[:, :-1].ravel())[0, 1]:.2f}; the true change's std "
+              f"{np.std(true_change):.4f}")
+    _, const = run_constant(tracked["train"], {"val": val})
+    e_const = squared_error(const["val"]["velocity"], val.velocity)
+    variants = {"tracked (the build)": (tracked["train"], val), "true boxes": (oracle["train"], oracle["val"])}
+    if a.walk:
+        rng = np.random.default_rng(0)
+        variants["true boxes + measured random walk"] = (with_walk(oracle["train"], step, rng),
+                                                         with_walk(oracle["val"], step, rng))
+    print(f"\nconstant predictor: val E_v {ev(e_const, val.bins):.3f} (near / medium / far {per_bin(e_const, val.bins)})")
+    for name, (tr, va) in variants.items():
+        e = val_errors(cfg, tr, va, a.seeds)
+        r = ratio_bootstrap(e, e_const, val.bins)
+        print(f"{name}: val E_v {ev(e, val.bins):.3f} (near / medium / far {per_bin(e, val.bins)}), "
+              f"{r['ratio']:.2f} x the constant [{r['ratio_lo']:.2f}, {r['ratio_hi']:.2f}]", flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
