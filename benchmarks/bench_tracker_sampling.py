@@ -48,9 +48,20 @@ def zoom(img: np.ndarray, s: float, centre: tuple[float, float], shift: float, s
     return cv2.resize(fine, size, interpolation=cv2.INTER_AREA) if k > 1 else fine
 
 
+def crop_around(img: np.ndarray, box, pad: int = 64) -> tuple[np.ndarray, tuple]:
+    """The part of ``img`` within max(pad, 2 x the box size) of the box, and the box in its coordinates (MedianFlow
+    looks only at and around the box, so the zoom needs no more)."""
+    x, y, w, h = box
+    r = int(max(pad, 2 * w, 2 * h))
+    c0, r0 = max(int(x) - r, 0), max(int(y) - r, 0)
+    c1, r1 = min(int(x + w) + r, img.shape[1]), min(int(y + h) + r, img.shape[0])
+    return img[r0:r1, c0:c1].copy(), (x - c0, y - r0, w, h)
+
+
 def drift(img: np.ndarray, box, samples: int, trials: int, change: float, seed: int = 0, frames: int = 40) -> float:
     """RMS error of the tracked log size at the first frame (the truth known) over ``trials`` zoom sequences."""
     rng = np.random.default_rng(seed)
+    img, box = crop_around(img, box)
     x, y, w, h = box
     centre = (x + w / 2, y + h / 2)
     errs = []
