@@ -10,7 +10,9 @@ coarser grid and upsampled (bilinear in linear colour). The domain look and the 
 camera's own pixels everywhere, so the noise is that of a full render. Inside the windows the linear colour
 (the sky's too: it is taken from the full frame's interpolated sky), labels, instances and depth are those of
 a full render (`tests/test_world_foveate.py`); outside, the image is
-blurrier than a full render's.
+blurrier than a full render's. With ``rays_across`` > 0 each pixel over a car then averages k x k rays
+(``car_sampling``; k from the car's width in pixels), as a sensor pixel integrates its area: the colour there is
+that of a k x k supersampled render, while labels, instances, depth and so the annotations stay one ray's.
 """
 from __future__ import annotations
 
