@@ -32,7 +32,7 @@ from redsup import config as rconfig  # noqa: E402
 from redsup.velocity.compare import ratio_bootstrap  # noqa: E402
 from redsup.velocity.data import TrackSet, load_split  # noqa: E402
 from redsup.velocity.experiment import run_constant, run_mlp  # noqa: E402
-from redsup.velocity.metrics import squared_error  # noqa: E402
+from redsup.velocity.metrics import binned_error, squared_error  # noqa: E402
 from redsup.world.clips import clip_camera, clip_motorway  # noqa: E402
 from redsup.world.common import rotate  # noqa: E402
 from redsup.world.motorway import motorway_state  # noqa: E402
@@ -113,10 +113,6 @@ def per_bin(e: np.ndarray, bins: np.ndarray) -> str:
     return " / ".join(f"{e[bins == k].mean():.2f}" for k in range(3) if (bins == k).any())
 
 
-def ev(e: np.ndarray, bins: np.ndarray) -> float:
-    """E_v as the tables give it: the mean of the distance bins' means."""
-    return float(np.mean([e[bins == k].mean() for k in range(3) if (bins == k).any()]))
-
 
 def main(argv=None) -> int:
     import torch
@@ -161,11 +157,12 @@ def main(argv=None) -> int:
         rng = np.random.default_rng(0)
         variants["true boxes + measured random walk"] = (with_walk(oracle["train"], step, rng),
                                                          with_walk(oracle["val"], step, rng))
-    print(f"\nconstant predictor: val E_v {ev(e_const, val.bins):.3f} (near / medium / far {per_bin(e_const, val.bins)})")
+    ev_const = binned_error(e_const, val.bins, "E_v")["E_v"]
+    print(f"\nconstant predictor: val E_v {ev_const:.3f} (near / medium / far {per_bin(e_const, val.bins)})")
     for name, (tr, va) in variants.items():
         e = val_errors(cfg, tr, va, a.seeds)
         r = ratio_bootstrap(e, e_const, val.bins)
-        print(f"{name}: val E_v {ev(e, val.bins):.3f} (near / medium / far {per_bin(e, val.bins)}), "
+        print(f"{name}: val E_v {r['ev_a']:.3f} (near / medium / far {per_bin(e, val.bins)}), "
               f"{r['ratio']:.2f} x the constant [{r['ratio_lo']:.2f}, {r['ratio_hi']:.2f}]", flush=True)
     return 0
 

@@ -23,7 +23,7 @@ from .common import rotate
 from .prims import CAR_KINDS, Prims
 from .raycast import Pairs
 from .sensors import Camera, box_corners, fine_camera
-from .shade import finish, radiance, sky_image
+from .shade import finish, pixel_average, radiance, sky_image
 from .textures import SKY
 
 
@@ -166,7 +166,7 @@ def radiance_foveated(cam: Camera, T_world_cam: np.ndarray, prims: Prims, view, 
         h_, w_ = r1 - r0, c1 - c0
         fine = radiance(fine_camera(crop_camera(cam, r0, r1, c0, c1), k), T_world_cam, prims, view, appearance,
                         render_distance, fog_distance)
-        avg = fine["linear"].reshape(h_, k, w_, k, 3).mean(axis=(1, 3))
+        avg = pixel_average(fine["linear"], h_, w_, k).reshape(h_, w_, 3)
         sky_only = (fine["label"].reshape(h_, k, w_, k) == SKY).all(axis=(1, 3))
         avg[sky_only] = linear[r0:r1, c0:c1][sky_only]      # the frame's sky where no ray hits anything
         linear[r0:r1, c0:c1] = avg

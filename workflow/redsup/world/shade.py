@@ -143,6 +143,13 @@ def sky_image(cam, T_world_cam: np.ndarray, style: textures.Style, step: int = 4
     return big[:cam.height, :cam.width].reshape(-1, 3)
 
 
+def pixel_average(linear: np.ndarray, height: int, width: int, k: int) -> np.ndarray:
+    """(height * width, 3) colour of each camera pixel as the mean of its k x k rays, from the linear colour
+    ((k height * k width, 3), row-major) of the k-times finer grid (``sensors.fine_camera``): a sensor pixel
+    integrates its area."""
+    return linear.reshape(height, k, width, k, 3).mean(axis=(1, 3)).reshape(-1, 3)
+
+
 def render_camera(cam, T_world_cam: np.ndarray, prims: Prims, view: SceneView, appearance: dict,
                   pixel_noise: float, render_distance: float, fog_distance: float, rng: np.random.Generator,
                   supersample: int = 1):
@@ -159,7 +166,7 @@ def render_camera(cam, T_world_cam: np.ndarray, prims: Prims, view: SceneView, a
     linear = out.pop("linear")
     if supersample > 1:
         k = supersample
-        linear = linear.reshape(cam.height, k, cam.width, k, 3).mean(axis=(1, 3)).reshape(-1, 3)
+        linear = pixel_average(linear, cam.height, cam.width, k)
     out["rgb"] = finish(linear, appearance, pixel_noise, rng).reshape(cam.height, cam.width, 3)
     return out
 
