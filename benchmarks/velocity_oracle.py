@@ -8,10 +8,14 @@ its seed (nothing is rendered) and the vehicle's true box in every frame is the 
 - the tracker's error on the apparent size against the truth, both taken relative to the last frame (where the
   tracker starts from the annotated box): its std at the first frame (the drift over the clip, what a velocity
   estimate from the size change sees) and the std of its frame-to-frame steps;
+- the same drift split by partial occlusion (``hidden_fraction``: the largest share of the vehicle's true box that
+  the true box of one nearer vehicle covers in some frame, above ``--hidden``), with a line of the tracked size
+  change on the true one per group;
 - MLP-tracker's val E_v (the configured recipe, ``--seeds``, the epoch kept on val) trained and scored on the
   tracked boxes (the build's), on the true boxes, and on the true boxes with a random walk of the measured step
   size added (``--walk``), against the constant predictor (training-mean velocity);
-  with paired, bin-stratified 95 % intervals (``redsup.velocity.compare.ratio_bootstrap``).
+  with paired, bin-stratified 95 % intervals (``redsup.velocity.compare.ratio_bootstrap``), and each variant's
+  per-bin E_v on the partly hidden and the clear vehicles.
 
 Never reads the test split.
 
@@ -42,26 +46,63 @@ from redsup.world.sensors import box_corners  # noqa: E402
 BINS = ("near", "medium", "far")
 
 
-def true_boxes(world_cfg: dict, clips_cfg: dict, split: str, seed: int, clip: int, track_ids) -> np.ndarray:
-    """(len(track_ids), frames, 4) x, y, w, h (px) of the projected body and cabin of the given vehicles of clip
-    ``clip`` (1-based) in every frame, clipped to the image."""
+def clip_boxes(world_cfg: dict, clips_cfg: dict, split: str, seed: int, clip: int):
+    """Every vehicle of clip ``clip`` (1-based): (track ids (V,), boxes (V, frames, 4) x, y, w, h px of the
+    projected body and cabin clipped to the image, depth (V, frames) m, the camera z of the body's centre)."""
     mw, _ = clip_motorway(world_cfg, clips_cfg, split, seed, clip - 1)
     cam = clip_camera(world_cfg, clips_cfg)
-    index = {int(t): k for k, t in enumerate(mw.cars["track_id"])}
-    rows = [index[int(t)] for t in track_ids]
-    out = np.zeros((len(rows), clips_cfg["frames"], 4))
+    ids = np.asarray(mw.cars["track_id"], dtype=np.int64)
+    out = np.zeros((len(ids), clips_cfg["frames"], 4))
+    depth = np.zeros((len(ids), clips_cfg["frames"]))
     for i in range(clips_cfg["frames"]):
         state = motorway_state(mw, i)
         T_cw = np.linalg.inv(state.T_world_vehicle @ cam.T_vehicle_sensor)
         p = state.prims
-        for j, k in enumerate(rows):
+        for k in range(len(ids)):
             sel = np.isin(p.kind, CAR_KINDS) & (p.ent == k)
             corners = box_corners(p.center[sel], p.rot[sel], p.half[sel])
             corners = rotate(corners.reshape(-1, 3), T_cw[:3, :3]).reshape(1, -1, 3) + T_cw[:3, 3]
             u0, u1, v0, v1, _ = cam.project_bounds(corners)
             u0, u1 = np.clip([u0[0], u1[0]], -0.5, cam.width - 0.5)
             v0, v1 = np.clip([v0[0], v1[0]], -0.5, cam.height - 0.5)
-            out[j, i] = (u0, v0, u1 - u0, v1 - v0)
+            out[k, i] = (u0, v0, u1 - u0, v1 - v0)
+            depth[k, i] = corners[0, :, 2].mean()
+    return ids, out, depth
+
+
+def true_boxes(world_cfg: dict, clips_cfg: dict, split: str, seed: int, clip: int, track_ids) -> np.ndarray:
+    """(len(track_ids), frames, 4) x, y, w, h (px) of the projected body and cabin of the given vehicles of clip
+    ``clip`` (1-based) in every frame, clipped to the image."""
+    ids, boxes, _ = clip_boxes(world_cfg, clips_cfg, split, seed, clip)
+    index = {int(t): k for k, t in enumerate(ids)}
+    return boxes[[index[int(t)] for t in track_ids]]
+
+
+def hidden_fraction(boxes: np.ndarray, depth: np.ndarray, rows) -> np.ndarray:
+    """(len(rows),) for each vehicle ``rows[j]`` the largest share, over the frames, of its box covered by the box
+    of one vehicle nearer to the camera (boxes (V, frames, 4) x, y, w, h; depth (V, frames)): a silhouette-box
+    proxy of partial occlusion during the clip."""
+    x0, y0 = boxes[..., 0], boxes[..., 1]
+    x1, y1 = x0 + boxes[..., 2], y0 + boxes[..., 3]
+    out = np.zeros(len(rows))
+    for j, r in enumerate(rows):
+        w = np.clip(np.minimum(x1[r], x1) - np.maximum(x0[r], x0), 0, None)
+        h = np.clip(np.minimum(y1[r], y1) - np.maximum(y0[r], y0), 0, None)
+        nearer = (depth > 0) & (depth < depth[r])
+        area = np.clip(boxes[r, :, 2] * boxes[r, :, 3], 1e-9, None)
+        share = np.where(nearer & (depth[r] > 0), w * h, 0.0) / area
+        out[j] = share.max()
+    return out
+
+
+def split_hidden(cfg: dict, split: str, tracks: TrackSet) -> np.ndarray:
+    """``hidden_fraction`` of every vehicle of ``tracks`` (a clip split of the build)."""
+    out = np.zeros(len(tracks))
+    for c in np.unique(tracks.clip):
+        m = tracks.clip == c
+        ids, boxes, depth = clip_boxes(cfg["world"], cfg["velocity_clips"], split, cfg["seed"], int(c))
+        index = {int(t): k for k, t in enumerate(ids)}
+        out[m] = hidden_fraction(boxes, depth, [index[int(t)] for t in tracks.track_id[m]])
     return out
 
 
@@ -123,6 +164,8 @@ def main(argv=None) -> int:
     ap.add_argument("--results", default="results", help="a finished build's results folder")
     ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
     ap.add_argument("--walk", action="store_true", help="also the true boxes plus the measured random walk")
+    ap.add_argument("--hidden", type=float, default=0.05,
+                    help="share of a vehicle's box under a nearer vehicle's box that counts it partly hidden")
     a = ap.parse_args(argv)
     torch.set_num_threads(1)
     cfg = rconfig.load(a.config, {"profile": a.profile})
@@ -150,6 +193,25 @@ def main(argv=None) -> int:
               f"(x sqrt(39) = {step[k] * np.sqrt(39):.4f}), lag-1 autocorrelation of steps "
               f"{np.corrcoef(steps[:, 1:].ravel(), steps[:, :-1].ravel())[0, 1]:.2f}; the true change's std "
               f"{np.std(true_change):.4f}")
+    hidden = split_hidden(cfg, "val", val) > a.hidden
+    print(f"\npartly hidden: a nearer vehicle's box covers more than {a.hidden:.0%} of the vehicle's box in some "
+          "frame of the clip (true boxes); the tracker's drift |error at the first frame| (median) and a line "
+          "tracked change = gain x true change + offset:")
+    for k, name in enumerate(BINS):
+        m = ok & (val.bins == k)
+        if not m.any():
+            continue
+        change = log_size(oracle["val"].boxes[:, 0]) - log_size(oracle["val"].boxes[:, -1])
+        parts = []
+        for label, sel in (("hidden", m & hidden), ("clear", m & ~hidden)):
+            if sel.sum() < 3:
+                parts.append(f"{label} {int(sel.sum())}")
+                continue
+            gain, offset = np.polyfit(change[sel], change[sel] + err[sel, 0], 1)
+            resid = change[sel] + err[sel, 0] - (gain * change[sel] + offset)
+            parts.append(f"{label} {int(sel.sum())}: drift {np.median(np.abs(err[sel, 0])):.4f}, gain {gain:.2f}, "
+                         f"offset {offset:+.3f}, residual std {np.std(resid):.4f}")
+        print(f"  {name}: " + "; ".join(parts) + f" (the true change's std {np.std(change[m]):.4f})")
     _, const = run_constant(tracked["train"], {"val": val})
     e_const = squared_error(const["val"]["velocity"], val.velocity)
     variants = {"tracked (the build)": (tracked["train"], val), "true boxes": (oracle["train"], oracle["val"])}
@@ -164,6 +226,9 @@ def main(argv=None) -> int:
         r = ratio_bootstrap(e, e_const, val.bins)
         print(f"{name}: val E_v {r['ev_a']:.3f} (near / medium / far {per_bin(e, val.bins)}), "
               f"{r['ratio']:.2f} x the constant [{r['ratio_lo']:.2f}, {r['ratio_hi']:.2f}]", flush=True)
+        for label, sel in (("hidden", hidden), ("clear", ~hidden)):
+            print(f"    {label} ({int(sel.sum())} vehicles): near / medium / far {per_bin(e[sel], val.bins[sel])} "
+                  f"against the constant's {per_bin(e_const[sel], val.bins[sel])}", flush=True)
     return 0
 
 
