@@ -315,3 +315,19 @@ def test_mlflow_server_rest_api(store, tmp_path):
         assert len(children) == 3
         params = {p["key"]: p["value"] for p in by_id[ok_id]["data"].get("params", [])}
         assert params["lr"] == "0.1"
+
+
+def test_cpu_model_from_cpuinfo(tmp_path):
+    """runlog.cpu_model: the first non-empty "model name" of a cpuinfo file, spaces collapsed; every run record
+    names it (job.cpu and the redsup.cpu tag), so builds on different CPUs can be told apart."""
+    info = tmp_path / "cpuinfo"
+    info.write_text("processor\t: 0\nvendor_id\t: AuthenticAMD\nmodel name\t: AMD  EPYC 9B14\n\n"
+                    "processor\t: 1\nmodel name\t: Other\n")
+    assert runlog.cpu_model(info) == "AMD EPYC 9B14"
+    info.write_text("processor\t: 0\nmodel name\t:\n")          # empty: falls back to platform.processor()
+    assert runlog.cpu_model(info) == (__import__("platform").processor() or "unknown")
+    assert runlog.cpu_model(tmp_path / "missing") == (__import__("platform").processor() or "unknown")
+    with runlog.child_run(tmp_path / "r.json", "world", "x", rule="r", wildcards={}, config={"profile": "tiny"}):
+        pass
+    data = json.loads((tmp_path / "r.json").read_text())
+    assert data["job"]["cpu"] == data["tags"]["redsup.cpu"] == runlog.cpu_model()

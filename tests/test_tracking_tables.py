@@ -61,7 +61,7 @@ def test_summary_per_rule_and_stage_sorted_by_total(tmp_path):
     # train_001's run record has the job's own CPU seconds: they replace Snakemake's sampled 29.0
     record = tmp_path / "runs/raw/d/train_001.json"
     record.parent.mkdir(parents=True)
-    record.write_text(json.dumps({"job": {"uid": "u", "cpu_s": 31.5}}))
+    record.write_text(json.dumps({"job": {"uid": "u", "cpu_s": 31.5, "cpu": "Test CPU 9000"}}))
     (tmp_path / "runs/raw/d/train_000.json").write_text(json.dumps({"job": {"uid": "v"}}))   # older: no cpu_s
     (tmp_path / "runs/tables").mkdir(parents=True)   # a dot in the job's name is not a suffix
     (tmp_path / "runs/tables/t_lr0.1.json").write_text(json.dumps({"job": {"uid": "w", "cpu_s": 1.25}}))
@@ -84,6 +84,8 @@ def test_summary_per_rule_and_stage_sorted_by_total(tmp_path):
         in text
     assert "for 2 of 4 jobs (32.8 s; Snakemake's benchmark cpu_time, sampled every 30 s after a job's first 30 s, " \
         "has 30.0 s for them); the others: Snakemake's sampled cpu_time" in text
+    assert "Machine: unknown (3 jobs); Test CPU 9000 (1 job)." in text   # the records without a cpu: unknown
+    assert [j["machine"] for j in jobs if j["job"] == "raw/d/train_001"] == ["Test CPU 9000"]
     assert text.index("| world |") < text.index("| depth |") < text.index("| tables |")
     assert png.stat().st_size > 5000
     with pytest.raises(ValueError, match="no benchmark files"):

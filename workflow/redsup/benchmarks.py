@@ -73,21 +73,28 @@ def job_metrics(path: str | Path, cpu_s: float | None = None) -> dict[str, float
     return {metric: values[col] for col, metric in METRIC_NAMES.items() if math.isfinite(values[col])}
 
 
+def record_job(record_path: str | Path) -> dict:
+    """The ``job`` entry of a run record ({uid, pid, host, cpu, cpu_s}, `redsup.runlog.child_run`); {} where the
+    record is missing or unreadable."""
+    try:
+        with open(record_path) as fh:
+            job = json.load(fh).get("job")
+    except (OSError, ValueError, AttributeError):
+        return {}
+    return job if isinstance(job, dict) else {}
+
+
 def record_cpu_seconds(record_path: str | Path) -> float:
     """``job.cpu_s`` of a run record (the job's own getrusage CPU seconds, `redsup.runlog.child_run`); NaN where
     the record is missing, unreadable or older than that field."""
-    try:
-        with open(record_path) as fh:
-            value = (json.load(fh).get("job") or {}).get("cpu_s")
-    except (OSError, ValueError):
-        return math.nan
+    value = record_job(record_path).get("cpu_s")
     return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else math.nan
 
 
 def collect(root: str | Path, rule_stages: Mapping[str, str], exclude: tuple[str, ...] = (),
             runs_root: str | Path | None = None) -> list[dict]:
-    """Every benchmark file under ``root``: one dict per job (rule, stage, job, wall_s, max_rss_mb, cpu_s,
-    cpu_source, sampled_cpu_s). ``cpu_s`` is the job's own CPU time from its run record
+    """Every benchmark file under ``root``: one dict per job (rule, stage, job, machine, wall_s, max_rss_mb, cpu_s,
+    cpu_source, sampled_cpu_s); machine: the CPU model of its run record ("unknown" where it has none). ``cpu_s`` is the job's own CPU time from its run record
     (``<runs_root>/<x>.json`` beside ``<root>/<rule>/<x>.tsv``; default ``runs_root``: ``runs`` beside
     ``root``), ``cpu_source`` "job"; where the record lacks it, Snakemake's sampled ``cpu_time`` (``cpu_source``
     "benchmark"), a lower bound for jobs longer than 30 s (`redsup.runlog.process_cpu_seconds`)."""
@@ -100,8 +107,10 @@ def collect(root: str | Path, rule_stages: Mapping[str, str], exclude: tuple[str
             continue
         values = read_benchmark(path)
         job = path.relative_to(root / rule).with_suffix("")
-        own = record_cpu_seconds(record_path(path, benchmark_root=root, runs_root=runs))
+        rec = record_path(path, benchmark_root=root, runs_root=runs)
+        own = record_cpu_seconds(rec)
         jobs.append({"rule": rule, "stage": rule_stages.get(rule, "unknown"), "job": str(job),
+                     "machine": str(record_job(rec).get("cpu") or "unknown"),
                      "wall_s": values["s"], "max_rss_mb": values["max_rss"],
                      "cpu_s": own if math.isfinite(own) else values["cpu_time"],
                      "cpu_source": "job" if math.isfinite(own) else "benchmark",
@@ -147,13 +156,22 @@ def _cpu_note(jobs: list[dict]) -> str:
     return note + "."
 
 
+def _machine_note(jobs: list[dict]) -> str:
+    """Which CPUs ran the jobs (trainings round differently and run at other speeds on another CPU)."""
+    counts: dict[str, int] = {}
+    for j in jobs:
+        counts[j.get("machine", "unknown")] = counts.get(j.get("machine", "unknown"), 0) + 1
+    parts = [f"{name} ({n} job{'' if n == 1 else 's'})" for name, n in sorted(counts.items(), key=lambda kv: -kv[1])]
+    return "Machine: " + "; ".join(parts) + "."
+
+
 def markdown(jobs: list[dict]) -> str:
     """The run-time table: per stage, then per rule, both sorted by total wall time."""
     total = sum(j["wall_s"] for j in jobs if math.isfinite(j["wall_s"]))
     lines = ["# Run time and memory per stage and per rule", "",
              f"From {len(jobs)} Snakemake benchmark files (results/benchmarks/<rule>/...): {total:.1f} job-seconds "
              "in all (the sum over jobs; the wall time of a parallel run is less). Peak RSS is the largest "
-             "resident memory of one job of the group.", "", _cpu_note(jobs), ""]
+             "resident memory of one job of the group.", "", _cpu_note(jobs), "", _machine_note(jobs), ""]
     for by in ("stage", "rule"):
         rows = summarise(jobs, by)
         extra = " | stage" if by == "rule" else ""

@@ -75,6 +75,22 @@ def git_commit(cwd: str | Path | None = None) -> str:
         return "unknown"
 
 
+def cpu_model(cpuinfo: str | Path = "/proc/cpuinfo") -> str:
+    """The CPU's model name (the first ``model name`` of Linux's ``cpuinfo``; elsewhere ``platform.processor()``),
+    or "unknown": trainings round differently on different CPUs, so a build's numbers and times name their machine."""
+    try:
+        with open(cpuinfo) as fh:
+            for line in fh:
+                key, _, value = line.partition(":")
+                if key.strip() == "model name" and value.strip():
+                    return " ".join(value.split())
+    except OSError:
+        pass
+    import platform
+
+    return platform.processor() or "unknown"
+
+
 def _now_ms() -> int:
     return int(time.time() * 1000)
 
@@ -250,21 +266,22 @@ def child_run(record_path: str | Path, parent: str, run_name: str, *, rule: str,
               params: Mapping[str, Any] | None = None) -> Iterator[RunRecord]:
     """Collect one child run of parent `parent` (a table id, "data_preparation", "world", ...).
 
-    Tags: rule, wildcards, config hash, git commit, profile. The resolved config is kept as the
-    artifact `config.yaml`. The record is written provisionally at the start (status RUNNING, with
-    ``job`` = {uid, pid, host} that identifies this attempt of the job) and finally with its real status and
+    Tags: rule, wildcards, config hash, git commit, profile, the CPU's model (`cpu_model`). The resolved config is
+    kept as the artifact `config.yaml`. The record is written provisionally at the start (status RUNNING, with
+    ``job`` = {uid, pid, host, cpu} that identifies this attempt of the job) and finally with its real status and
     ``job.cpu_s`` (`process_cpu_seconds` at the end).
     """
     path = Path(record_path)
     path.parent.mkdir(parents=True, exist_ok=True)
     wildcards = {str(k): str(v) for k, v in dict(wildcards or {}).items()}
+    cpu = cpu_model()
     data = {
         "parent": parent, "run_name": run_name, "status": "RUNNING", "start_time": _now_ms(),
-        "job": {"uid": uuid.uuid4().hex, "pid": os.getpid(), "host": socket.gethostname()},
+        "job": {"uid": uuid.uuid4().hex, "pid": os.getpid(), "host": socket.gethostname(), "cpu": cpu},
         "end_time": None, "params": {}, "metrics": [], "artifacts": [], "parent_artifacts": [], "models": [],
         "tags": {"redsup.rule": rule, "redsup.wildcards": json.dumps(wildcards, sort_keys=True),
                  "redsup.config_hash": config_hash(plain(config)), "redsup.git_commit": git_commit(),
-                 "redsup.profile": str(config.get("profile", "unknown")),
+                 "redsup.profile": str(config.get("profile", "unknown")), "redsup.cpu": cpu,
                  **{f"redsup.wildcard.{k}": v for k, v in wildcards.items()}},
     }
     record = RunRecord(path, data)
