@@ -197,11 +197,11 @@ def main(argv=None) -> int:
     print(f"\npartly hidden: a nearer vehicle's box covers more than {a.hidden:.0%} of the vehicle's box in some "
           "frame of the clip (true boxes); the tracker's drift |error at the first frame| (median) and a line "
           "tracked change = gain x true change + offset:")
+    change = log_size(oracle["val"].boxes[:, 0]) - log_size(oracle["val"].boxes[:, -1])
     for k, name in enumerate(BINS):
         m = ok & (val.bins == k)
         if not m.any():
             continue
-        change = log_size(oracle["val"].boxes[:, 0]) - log_size(oracle["val"].boxes[:, -1])
         parts = []
         for label, sel in (("hidden", m & hidden), ("clear", m & ~hidden)):
             if sel.sum() < 3:

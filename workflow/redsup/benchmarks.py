@@ -15,6 +15,7 @@ from __future__ import annotations
 import csv
 import json
 import math
+from collections import Counter
 from collections.abc import Mapping
 from pathlib import Path
 
@@ -84,20 +85,21 @@ def record_job(record_path: str | Path) -> dict:
     return job if isinstance(job, dict) else {}
 
 
-def record_cpu_seconds(record_path: str | Path) -> float:
-    """``job.cpu_s`` of a run record (the job's own getrusage CPU seconds, `redsup.runlog.child_run`); NaN where
-    the record is missing, unreadable or older than that field."""
-    value = record_job(record_path).get("cpu_s")
+def _cpu_seconds(job: Mapping) -> float:
+    """``cpu_s`` of a run record's ``job`` entry (the job's own getrusage CPU seconds); NaN where the record is
+    missing, unreadable or older than that field."""
+    value = job.get("cpu_s")
     return float(value) if isinstance(value, (int, float)) and not isinstance(value, bool) else math.nan
 
 
 def collect(root: str | Path, rule_stages: Mapping[str, str], exclude: tuple[str, ...] = (),
             runs_root: str | Path | None = None) -> list[dict]:
-    """Every benchmark file under ``root``: one dict per job (rule, stage, job, machine, wall_s, max_rss_mb, cpu_s,
-    cpu_source, sampled_cpu_s); machine: the CPU model of its run record ("unknown" where it has none). ``cpu_s`` is the job's own CPU time from its run record
-    (``<runs_root>/<x>.json`` beside ``<root>/<rule>/<x>.tsv``; default ``runs_root``: ``runs`` beside
-    ``root``), ``cpu_source`` "job"; where the record lacks it, Snakemake's sampled ``cpu_time`` (``cpu_source``
-    "benchmark"), a lower bound for jobs longer than 30 s (`redsup.runlog.process_cpu_seconds`)."""
+    """Every benchmark file under ``root``: one dict per job (rule, stage, job, machine, wall_s, max_rss_mb,
+    cpu_s, cpu_source, sampled_cpu_s); ``machine``: the CPU model of its run record ("unknown" where it has none).
+    ``cpu_s`` is the job's own CPU time from its run record (``<runs_root>/<x>.json`` beside
+    ``<root>/<rule>/<x>.tsv``; default ``runs_root``: ``runs`` beside ``root``), ``cpu_source`` "job"; where
+    the record lacks it, Snakemake's sampled ``cpu_time`` (``cpu_source`` "benchmark"), a lower bound for jobs
+    longer than 30 s (`redsup.runlog.process_cpu_seconds`)."""
     root = Path(root)
     runs = Path(runs_root) if runs_root is not None else root.parent / "runs"
     jobs = []
@@ -107,10 +109,10 @@ def collect(root: str | Path, rule_stages: Mapping[str, str], exclude: tuple[str
             continue
         values = read_benchmark(path)
         job = path.relative_to(root / rule).with_suffix("")
-        rec = record_path(path, benchmark_root=root, runs_root=runs)
-        own = record_cpu_seconds(rec)
+        record = record_job(record_path(path, benchmark_root=root, runs_root=runs))
+        own = _cpu_seconds(record)
         jobs.append({"rule": rule, "stage": rule_stages.get(rule, "unknown"), "job": str(job),
-                     "machine": str(record_job(rec).get("cpu") or "unknown"),
+                     "machine": str(record.get("cpu") or "unknown"),
                      "wall_s": values["s"], "max_rss_mb": values["max_rss"],
                      "cpu_s": own if math.isfinite(own) else values["cpu_time"],
                      "cpu_source": "job" if math.isfinite(own) else "benchmark",
@@ -158,11 +160,8 @@ def _cpu_note(jobs: list[dict]) -> str:
 
 def _machine_note(jobs: list[dict]) -> str:
     """Which CPUs ran the jobs (trainings round differently and run at other speeds on another CPU)."""
-    counts: dict[str, int] = {}
-    for j in jobs:
-        counts[j.get("machine", "unknown")] = counts.get(j.get("machine", "unknown"), 0) + 1
-    parts = [f"{name} ({n} job{'' if n == 1 else 's'})" for name, n in sorted(counts.items(), key=lambda kv: -kv[1])]
-    return "Machine: " + "; ".join(parts) + "."
+    counts = Counter(j.get("machine", "unknown") for j in jobs)
+    return "Machine: " + "; ".join(f"{name} ({n} job{'' if n == 1 else 's'})" for name, n in counts.most_common()) + "."
 
 
 def markdown(jobs: list[dict]) -> str:

@@ -77,7 +77,8 @@ def git_commit(cwd: str | Path | None = None) -> str:
 
 def cpu_model(cpuinfo: str | Path = "/proc/cpuinfo") -> str:
     """The CPU's model name (the first ``model name`` of Linux's ``cpuinfo``; elsewhere ``platform.processor()``),
-    or "unknown": trainings round differently on different CPUs, so a build's numbers and times name their machine."""
+    or "unknown". Trainings round differently on different CPUs, so a build's numbers and times name their
+    machine."""
     try:
         with open(cpuinfo) as fh:
             for line in fh:
