@@ -18,7 +18,6 @@ the first frame over ``--trials`` sequences, for four ways of sampling the zoome
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -28,7 +27,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "workflow"))
 
-from redsup.prep.medianflow import track_backward  # noqa: E402
+from redsup.prep.medianflow import bbox_xywh, read_annotations, track_backward  # noqa: E402
 
 
 def zoom(img: np.ndarray, s: float, centre: tuple[float, float], shift: float, samples: int) -> np.ndarray:
@@ -97,8 +96,7 @@ def main(argv=None) -> int:
     real = Path(a.real)
     if (real / "imgs/040.jpg").exists():
         img = cv2.imread(str(real / "imgs/040.jpg"))
-        b = json.loads((real / "annotation.json").read_text())[0]["bbox"]
-        box = np.array([b["left"], b["top"], b["right"] - b["left"], b["bottom"] - b["top"]])
+        box = np.array(bbox_xywh(read_annotations(real)[0]["bbox"]))
         for width in a.real_widths:
             f = width / box[2]
             cases.append((f"real TuSimple car at {width:.0f} px",
@@ -109,9 +107,8 @@ def main(argv=None) -> int:
         if not last:
             continue
         img = cv2.imread(str(last[0]))
-        for v in json.loads((clips / str(c) / "annotation.json").read_text()):
-            b = v["bbox"]
-            box = (b["left"], b["top"], b["right"] - b["left"] + 1, b["bottom"] - b["top"] + 1)
+        for v in read_annotations(clips / str(c)):
+            box = bbox_xywh(v["bbox"])      # as the build's MedianFlow stage takes it
             cases.append((f"world {a.split} clip {c} car {v['track_id']} at {box[2]:.0f} px", img, box))
     if not cases:
         print("no cars: neither the real sample nor a build's clips were found")

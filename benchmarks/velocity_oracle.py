@@ -3,7 +3,7 @@ against MedianFlow's (run by hand, not a test; issue 11 §2: MLP-tracker against
 
 For every annotated vehicle of a finished build's train and val clip splits the clip's motorway is rebuilt from
 its seed (nothing is rendered) and the vehicle's true box in every frame is the projection of its body and cabin
-(``true_boxes``: the full silhouette's bounds, occlusion ignored). Prints, per distance bin of val:
+(``clip_boxes``: the full silhouette's bounds, occlusion ignored). Prints, per distance bin of val:
 
 - the tracker's error on the apparent size against the truth, both taken relative to the last frame (where the
   tracker starts from the annotated box): its std at the first frame (the drift over the clip, what a velocity
@@ -48,34 +48,33 @@ BINS = ("near", "medium", "far")
 
 def clip_boxes(world_cfg: dict, clips_cfg: dict, split: str, seed: int, clip: int):
     """Every vehicle of clip ``clip`` (1-based): (track ids (V,), boxes (V, frames, 4) x, y, w, h px of the
-    projected body and cabin clipped to the image, depth (V, frames) m, the camera z of the body's centre)."""
+    projected body and cabin clipped to the image, depth (V, frames) m, the camera z of the parts' corners, mean)."""
     mw, _ = clip_motorway(world_cfg, clips_cfg, split, seed, clip - 1)
     cam = clip_camera(world_cfg, clips_cfg)
     ids = np.asarray(mw.cars["track_id"], dtype=np.int64)
-    out = np.zeros((len(ids), clips_cfg["frames"], 4))
-    depth = np.zeros((len(ids), clips_cfg["frames"]))
-    for i in range(clips_cfg["frames"]):
+    V, T = len(ids), clips_cfg["frames"]
+    out = np.zeros((V, T, 4))
+    depth = np.zeros((V, T))
+    for i in range(T):
         state = motorway_state(mw, i)
         T_cw = np.linalg.inv(state.T_world_vehicle @ cam.T_vehicle_sensor)
         p = state.prims
-        for k in range(len(ids)):
-            sel = np.isin(p.kind, CAR_KINDS) & (p.ent == k)
-            corners = box_corners(p.center[sel], p.rot[sel], p.half[sel])
-            corners = rotate(corners.reshape(-1, 3), T_cw[:3, :3]).reshape(1, -1, 3) + T_cw[:3, 3]
-            u0, u1, v0, v1, _ = cam.project_bounds(corners)
-            u0, u1 = np.clip([u0[0], u1[0]], -0.5, cam.width - 0.5)
-            v0, v1 = np.clip([v0[0], v1[0]], -0.5, cam.height - 0.5)
-            out[k, i] = (u0, v0, u1 - u0, v1 - v0)
-            depth[k, i] = corners[0, :, 2].mean()
+        car = np.isin(p.kind, CAR_KINDS)
+        ent = p.ent[car]
+        corners = box_corners(p.center[car], p.rot[car], p.half[car])
+        corners = rotate(corners.reshape(-1, 3), T_cw[:3, :3]).reshape(-1, 8, 3) + T_cw[:3, 3]
+        u0, u1, v0, v1, _ = cam.project_bounds(corners)            # per part, then per vehicle
+        lo_u, hi_u = np.full(V, np.inf), np.full(V, -np.inf)
+        lo_v, hi_v = lo_u.copy(), hi_u.copy()
+        np.minimum.at(lo_u, ent, u0)
+        np.maximum.at(hi_u, ent, u1)
+        np.minimum.at(lo_v, ent, v0)
+        np.maximum.at(hi_v, ent, v1)
+        lo_u, hi_u = np.clip(lo_u, -0.5, cam.width - 0.5), np.clip(hi_u, -0.5, cam.width - 0.5)
+        lo_v, hi_v = np.clip(lo_v, -0.5, cam.height - 0.5), np.clip(hi_v, -0.5, cam.height - 0.5)
+        out[:, i] = np.stack([lo_u, lo_v, hi_u - lo_u, hi_v - lo_v], axis=1)
+        depth[:, i] = np.bincount(ent, corners[..., 2].sum(1), V) / np.maximum(8 * np.bincount(ent, minlength=V), 1)
     return ids, out, depth
-
-
-def true_boxes(world_cfg: dict, clips_cfg: dict, split: str, seed: int, clip: int, track_ids) -> np.ndarray:
-    """(len(track_ids), frames, 4) x, y, w, h (px) of the projected body and cabin of the given vehicles of clip
-    ``clip`` (1-based) in every frame, clipped to the image."""
-    ids, boxes, _ = clip_boxes(world_cfg, clips_cfg, split, seed, clip)
-    index = {int(t): k for k, t in enumerate(ids)}
-    return boxes[[index[int(t)] for t in track_ids]]
 
 
 def hidden_fraction(boxes: np.ndarray, depth: np.ndarray, rows) -> np.ndarray:
@@ -95,26 +94,22 @@ def hidden_fraction(boxes: np.ndarray, depth: np.ndarray, rows) -> np.ndarray:
     return out
 
 
-def split_hidden(cfg: dict, split: str, tracks: TrackSet) -> np.ndarray:
-    """``hidden_fraction`` of every vehicle of ``tracks`` (a clip split of the build)."""
-    out = np.zeros(len(tracks))
-    for c in np.unique(tracks.clip):
-        m = tracks.clip == c
-        ids, boxes, depth = clip_boxes(cfg["world"], cfg["velocity_clips"], split, cfg["seed"], int(c))
-        index = {int(t): k for k, t in enumerate(ids)}
-        out[m] = hidden_fraction(boxes, depth, [index[int(t)] for t in tracks.track_id[m]])
-    return out
-
-
-def oracle_split(cfg: dict, split: str, tracks: TrackSet) -> TrackSet:
+def oracle_split(cfg: dict, split: str, tracks: TrackSet) -> tuple[TrackSet, np.ndarray]:
+    """``tracks`` with every vehicle's true boxes instead of the tracked ones (the same vehicles, tracker failures
+    kept, for a paired comparison), and each vehicle's ``hidden_fraction``: one rebuild of each clip's motorway."""
     boxes = np.zeros_like(tracks.boxes)
+    hidden = np.zeros(len(tracks))
     for c in np.unique(tracks.clip):
         m = tracks.clip == c
-        boxes[m] = true_boxes(cfg["world"], cfg["velocity_clips"], split, cfg["seed"], int(c), tracks.track_id[m])
+        ids, clip_b, clip_depth = clip_boxes(cfg["world"], cfg["velocity_clips"], split, cfg["seed"], int(c))
+        index = {int(t): k for k, t in enumerate(ids)}
+        rows = [index[int(t)] for t in tracks.track_id[m]]
+        boxes[m] = clip_b[rows]
+        hidden[m] = hidden_fraction(clip_b, clip_depth, rows)
     out = tracks.subset(np.ones(len(tracks), bool))
-    out.boxes = boxes                     # the same vehicles train (tracker_failed kept) for a paired comparison
+    out.boxes = boxes
     out.failed_frames = np.zeros(boxes.shape[:2], bool)
-    return out
+    return out, hidden
 
 
 def log_size(boxes: np.ndarray) -> np.ndarray:
@@ -173,11 +168,14 @@ def main(argv=None) -> int:
     min_px = cfg["velocity"]["min_box_px"]
     tracked = {s: load_split(res / f"prepared/clips/{s}/medianflow.npz", res / f"raw/clips/{s}", min_px)
                for s in ("train", "val")}
-    oracle = {s: oracle_split(cfg, s, t) for s, t in tracked.items()}
+    oracle, hidden_share = {}, {}
+    for s, t in tracked.items():
+        oracle[s], hidden_share[s] = oracle_split(cfg, s, t)
     val = tracked["val"]
     ok = val.usable
     err = log_size(val.boxes) - log_size(val.boxes[:, -1:]) - (log_size(oracle["val"].boxes)
                                                                  - log_size(oracle["val"].boxes[:, -1:]))
+    change = log_size(oracle["val"].boxes[:, 0]) - log_size(oracle["val"].boxes[:, -1])
     step = np.zeros(3)
     print(f"tracker's log-size error against the truth (val, {int(ok.sum())} of {len(val)} vehicles tracked "
           "without failure), relative to the last frame:")
@@ -187,17 +185,15 @@ def main(argv=None) -> int:
             continue
         steps = np.diff(err[m], axis=1)
         step[k] = float(np.std(steps))
-        true_change = log_size(oracle["val"].boxes[m, 0]) - log_size(oracle["val"].boxes[m, -1])
         print(f"  {name}: {int(m.sum())} vehicles, last box {np.median(val.boxes[m, -1, 2]):.0f} px wide; drift "
               f"over the clip (std at the first frame) {np.std(err[m, 0]):.4f}, step std {step[k]:.4f} "
               f"(x sqrt(39) = {step[k] * np.sqrt(39):.4f}), lag-1 autocorrelation of steps "
               f"{np.corrcoef(steps[:, 1:].ravel(), steps[:, :-1].ravel())[0, 1]:.2f}; the true change's std "
-              f"{np.std(true_change):.4f}")
-    hidden = split_hidden(cfg, "val", val) > a.hidden
+              f"{np.std(change[m]):.4f}")
+    hidden = hidden_share["val"] > a.hidden
     print(f"\npartly hidden: a nearer vehicle's box covers more than {a.hidden:.0%} of the vehicle's box in some "
           "frame of the clip (true boxes); the tracker's drift |error at the first frame| (median) and a line "
           "tracked change = gain x true change + offset:")
-    change = log_size(oracle["val"].boxes[:, 0]) - log_size(oracle["val"].boxes[:, -1])
     for k, name in enumerate(BINS):
         m = ok & (val.bins == k)
         if not m.any():

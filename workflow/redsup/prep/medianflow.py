@@ -152,6 +152,11 @@ def read_annotations(clip_dir: str | Path) -> list[dict]:
     return annotations
 
 
+def bbox_xywh(bbox: dict) -> tuple[float, float, float, float]:
+    """A TuSimple annotation's bbox {top, left, bottom, right} as the tracker's (x, y, w, h), w = right - left."""
+    return (bbox["left"], bbox["top"], bbox["right"] - bbox["left"], bbox["bottom"] - bbox["top"])
+
+
 def read_frames(clip_dir: str | Path, n_frames: int) -> tuple[list[np.ndarray | None], list[str]]:
     """(frames as BGR images, None where missing or unreadable, problems naming each such file).
     Frames of another size than the last frame count as unreadable."""
@@ -210,9 +215,7 @@ def track_split(split_dir: str | Path, medianflow_cfg: dict) -> tuple[dict, dict
             n_missing += 1
             problems.extend(f"{p} (a failed frame of every vehicle in the clip)" for p in frame_problems)
         for k, a in enumerate(annotations):
-            b = a["bbox"]
-            xywh = (b["left"], b["top"], b["right"] - b["left"], b["bottom"] - b["top"])
-            boxes, failed, gated = track_backward(frames, xywh, scale, max_scale_step, settings)
+            boxes, failed, gated = track_backward(frames, bbox_xywh(a["bbox"]), scale, max_scale_step, settings)
             cols["clip"].append(int(clip_dir.name))
             cols["track_id"].append(int(a.get("track_id", k)))
             cols["boxes"].append(boxes)
