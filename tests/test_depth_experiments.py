@@ -49,6 +49,17 @@ def test_rows_of_every_table_at_default(cfg):
     labels = {r.label for r in rows["mccraith_ch4_table5"]}
     assert labels >= {"ours | M", "ours | S", "ours | MS", "Monodepth V2 [9] | S"}
     assert [r.label for r in rows["mccraith_ch4_table7"]] == ["baseline | 0", "Ours | 20", "Ours | 50"]
+    # the domain-shift rows: the Cityscapes-like model on the KITTI-like test data (until 2026-12-06 the rows
+    # named no test data, so Table 7 tested the model on its own domain and Fig. 5's CS rows asked for the
+    # Cityscapes-like long split, which has no scene, and were dropped)
+    assert {(r.spec.model, r.spec.data) for r in rows["mccraith_ch4_table7"]} == {("world_cityscapes/M",
+                                                                                   "world_kitti/test")}
+    f5 = [r for r in rows["mccraith_ch4_fig5"] if r.label.startswith("CS")]
+    assert [r.label for r in f5] == [f"CS | {k}" for k in (0, 5, 10, 20, 50)]
+    assert {(r.spec.model, r.spec.data) for r in f5} == {("world_cityscapes/M", "world_kitti/long")}
+    # no row of the default is dropped for want of data: every configured row has its model and test scenes
+    for t in DEPTH_TABLES:
+        assert {r.label for r in rows[t]} == {r.label for r in plan.expand_rows(t, cfg["depth"])}, t
     # every Galteland model trains 3 seeds in default: each row once per seed, under one label
     t51 = rows["galteland_table5_1"]
     assert len({r.label for r in t51}) == 9 + 2  # Manydepth 3 x 3 domains, Feature Depth on Lyft and DDAD
@@ -303,3 +314,17 @@ def test_prediction_batches_go_to_the_networks_device(monkeypatch):
     depth = experiments._predict(models, batch, {})
     assert seen == {"target": torch.device("meta"), "prev": torch.device("meta"), "K": torch.device("meta")}
     assert depth.shape == (4, 6)
+
+
+def test_table_note_joins_a_list_of_notes(cfg):
+    """A table's note may be a list (tables share explanations through YAML anchors): its items become sentences
+    of the caption, in order, each once; the default's ch. 4 Table 6 carries the adaptation and the sequential
+    explanations, Fig. 4 the sequential one."""
+    one = plan.table_note(cfg, {"note": "first part."}, {})
+    two = plan.table_note(cfg, {"note": ["first part.", "second part"]}, {})
+    assert "; first part; " in one and "; first part. second part; " in two
+    t6 = plan.table_note(cfg, cfg["depth"]["tables"]["mccraith_ch4_table6"], {})
+    assert t6.count("Why adaptation does not beat the baseline here") == 1
+    assert t6.count("the car stops for frames 50-125") == 1
+    f4 = plan.table_note(cfg, cfg["depth"]["tables"]["mccraith_ch4_fig4"], {})
+    assert "the car stops for frames 50-125" in f4 and "Why adaptation does not beat" not in f4

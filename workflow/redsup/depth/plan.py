@@ -326,8 +326,9 @@ def table_note(config: Mapping, table_cfg: Mapping, info: Mapping, seeds: int = 
     if table_cfg.get("fps_column") and timing:
         parts.append(f"{table_cfg['fps_column']}: one frame per forward pass at {timing['height']}x{timing['width']} on "
                      f"{timing['device']} ({timing['threads']} torch thread(s)); the thesis measured on an NVIDIA T4")
-    if table_cfg.get("note"):
-        parts.append(str(table_cfg["note"]).rstrip("."))
+    note = table_cfg.get("note")
+    if note:
+        parts.append(". ".join(str(n).rstrip(".") for n in ([note] if isinstance(note, str) else note)))
     groups = info.get("groups", {})
     if groups:
         parts.append("frames averaged per comparison group (the same frames for every row of a group): "
