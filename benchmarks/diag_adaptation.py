@@ -48,7 +48,8 @@ def parse_args(argv=None):
     p.add_argument("--profile", default="default")
     p.add_argument("--results", required=True, help="results/ of a finished build")
     p.add_argument("--model", default="world_kitti/M", help="<dataset>/<mode>[/seed<k>] under results/depth/models")
-    p.add_argument("--split", default="test", help="scenes of the model's dataset to adapt on")
+    p.add_argument("--split", default="test", help="scenes to adapt on")
+    p.add_argument("--test-dataset", default=None, help="dataset of those scenes (default: the model's)")
     p.add_argument("--frames", default="short", help="a key of depth.eval.frames")
     p.add_argument("--sources", nargs="+", default=["prev", "next"])
     p.add_argument("--groups", nargs="+", default=["depth_encoder", "pose_encoder"])
@@ -130,7 +131,7 @@ def frame_errors(gt: np.ndarray, pred: np.ndarray, eval_cfg, regions: dict) -> d
 def main(argv=None) -> int:
     args = parse_args(argv)
     if args.windows:
-        rows = windows(Path(args.results), *args.windows, args.model.split("/")[0], args.window)
+        rows = windows(Path(args.results), *args.windows, args.test_dataset or args.model.split("/")[0], args.window)
         for r in rows:
             print(f"{r['sequence']} frames {r['frames'][0]:4d}-{r['frames'][1]:4d} ({r['n']:3d}) ego {r['ego_speed']:5.1f} m/s"
                   f" | {args.windows[0]} {r['run']:.3f} | baseline {r['baseline']:.3f}")
@@ -145,7 +146,7 @@ def main(argv=None) -> int:
     eval_cfg = dcfg["eval"]
     res = Path(args.results)
     models, meta = checkpoint.load(res / "depth" / "models" / f"{args.model}.pt")
-    dataset = args.model.split("/")[0]
+    dataset = args.test_dataset or args.model.split("/")[0]
     camera = eval_cfg["camera"]
     scene_dirs = sorted((res / "raw" / dataset).glob(f"{args.split}_*"))
     if not scene_dirs:
