@@ -455,6 +455,10 @@ def test_table_frame_means_and_seed_records():
     frame3 = plan.table_frame("mccraith_ch7_table3", config, plan.rows(config)["mccraith_ch7_table3"],
                               {"a/seed0": _metrics(1, 2, 3), "a/seed1": _metrics(3, 4, 5)})
     assert frame3.ours.loc["2", "AP_BEV Medium"] == 3 and "lifting" not in frame3.note
+    config["lidar_detector"]["tables"]["mccraith_ch7_table3"]["note"] = "why the rows stand where they do."
+    frame3 = plan.table_frame("mccraith_ch7_table3", config, plan.rows(config)["mccraith_ch7_table3"],
+                              {"a/seed0": _metrics(1, 2, 3), "a/seed1": _metrics(3, 4, 5)})
+    assert frame3.note.endswith("; why the rows stand where they do")
 
 
 @pytest.mark.parametrize("steps", [3, 20])

@@ -92,4 +92,6 @@ def table_frame(table_id: str, config: dict, rows: list, results: dict) -> Table
         note += (f"; {tcfg['lifting_row']} = the ch. 6 method (lifting.full_method = "
                  f"{config['lifting']['full_method']}, {len(config['lifting']['seeds'])} seeds) on the same test "
                  "scenes")
+    if tcfg.get("note"):
+        note += "; " + str(tcfg["note"]).rstrip(".")
     return TableFrame(ours=ours, noise=noise, note=note)
