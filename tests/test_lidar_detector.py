@@ -107,6 +107,32 @@ def test_target_builder_votes_for_the_lowest_loss_neighbour_end_to_end(tmpl):
     assert g[good[0], good[1]] > 0 and int((g > 0).sum()) == 1
 
 
+def test_recentred_vote_moves_to_the_cell_of_the_winners_centre(tmpl):
+    """vote_recentre (ch. 7 sec. 3.3 "updated center"): with window 0 the first vote can only pick the median's
+    cell; a second vote around the cell holding that cell's predicted centre picks that cell, two cells on. A
+    predicted centre off the grid keeps the last winner."""
+    grid = GridSpec(x_range=(0.0, 12.0), y_range=(-4.0, 4.0), pillar=0.2, stride=2)
+    bev = grid.bev()
+    lm = _left_rear_scan(tmpl, np.array([6.13, 0.35, 0.1]), 0.3)
+    objs = TG.weak_objects([[lm]], min_points=3, max_points=None, rng=np.random.default_rng(0))
+    med = TG.median_cell(bev, objs.points, objs.mask)[0]
+    H, W = bev.height, bev.width
+    offset = torch.zeros(1, 3, H, W)
+    offset[0, 0] = 0.2
+    offset[0, 1] = 0.2
+    offset[0, 0, med[0], med[1]] = 2 * bev.cell + 0.2      # the median's cell points two cells on in x
+    outputs = {"offset": offset, "yaw": torch.zeros(1, N_BINS, H, W)}
+    once = TG.assign_weak(bev, outputs, objs, window=0, loss_fn=SIC, template=tmpl)
+    twice = TG.assign_weak(bev, outputs, objs, window=0, loss_fn=SIC, template=tmpl, recentre=1)
+    assert once.cell[0].tolist() == med.tolist()
+    assert twice.cell[0].tolist() == [int(med[0]), int(med[1]) + 2] and twice.median[0].tolist() == med.tolist()
+    offset[0, 0, med[0], med[1]] = 100.0                   # a centre beyond the grid: stay
+    off_grid = TG.assign_weak(bev, outputs, objs, window=0, loss_fn=SIC, template=tmpl, recentre=2)
+    assert off_grid.cell[0].tolist() == med.tolist()
+    with pytest.raises(ValueError, match="recentre"):
+        TG.assign_weak(bev, outputs, objs, window=0, loss_fn=SIC, template=tmpl, recentre=-1)
+
+
 def test_eq9_vote_adds_the_yaw_cross_entropy(tmpl):
     """Two cells of the window predict the same (true) centre, so their alignment at the best bin ties;
     the eq. (9) vote breaks the tie with the cross-entropy: the cell whose yaw logits already favour the

@@ -113,23 +113,32 @@ def vote_eq9(grid: BevGrid, offsets: torch.Tensor, yaw_logits: torch.Tensor, poi
 def assign_weak(grid: BevGrid, outputs: dict[str, torch.Tensor], objs: WeakObjects, window: int,
                 loss_fn: Callable[[torch.Tensor], torch.Tensor], template: Template,
                 yaw_mode: str = "predicted", vote_points: int | None = None,
-                generator: torch.Generator | None = None) -> WeakAssignment:
+                generator: torch.Generator | None = None, recentre: int = 0) -> WeakAssignment:
     """Median cell of each L_m, then multi-cell voting over the (2 window + 1)^2 neighbourhood using the
-    current predictions (no gradients); `yaw_mode` "predicted" | "best" | "loss" (module docstring)."""
+    current predictions (no gradients); `yaw_mode` "predicted" | "best" | "loss" (module docstring).
+
+    ``recentre`` k > 0: k more votes, each over the window around the cell that holds the previous winner's
+    predicted centre (ch. 7 sec. 3.3: "the center of the best prediction is used as an updated center"), so
+    the chosen cell can reach (k + 1) window cells from the median; an object whose predicted centre leaves
+    the grid keeps its last winner."""
+    if recentre < 0:
+        raise ValueError(f"recentre must be >= 0, got {recentre}")
     pts = objs.points.to(outputs["offset"].device)
     mask = objs.mask.to(pts.device)
     med = median_cell(grid, pts, mask)
     off, logits, frame = outputs["offset"].detach(), outputs["yaw"].detach(), objs.frame.to(pts.device)
-    if yaw_mode == "predicted":
-        res = vote(grid, off, logits, pts, mask, med, frame, window, loss_fn, template, yaw_mode="predicted")
-    elif yaw_mode in ("best", "loss"):
-        vp, vm = _subsample(pts, mask, vote_points, generator)
-        if yaw_mode == "best":
-            res = vote(grid, off, logits, vp, vm, med, frame, window, loss_fn, template, yaw_mode="best")
-        else:
-            res = vote_eq9(grid, off, logits, vp, vm, med, frame, window, loss_fn, template)
-    else:
+    if yaw_mode not in ("predicted", "best", "loss"):
         raise ValueError(f"vote yaw mode must be 'predicted', 'best' or 'loss', got {yaw_mode!r}")
+    vp, vm = (pts, mask) if yaw_mode == "predicted" else _subsample(pts, mask, vote_points, generator)
+    cells = med
+    for k in range(recentre + 1):
+        if yaw_mode == "loss":
+            res = vote_eq9(grid, off, logits, vp, vm, cells, frame, window, loss_fn, template)
+        else:
+            res = vote(grid, off, logits, vp, vm, cells, frame, window, loss_fn, template, yaw_mode=yaw_mode)
+        if k < recentre:
+            moved = grid.cell_of(res.centre)
+            cells = torch.where((moved[:, :1] >= 0) & (res.cell[:, :1] >= 0), moved, res.cell)
     valid = res.cell[:, 0] >= 0
     return WeakAssignment(res.cell, valid, med, res)
 

@@ -67,6 +67,7 @@ class TrainSpec:
     max_points: int = 128
     vote_yaw: str = "predicted"
     vote_points: int = 32
+    vote_recentre: int = 0
     min_radius: int = 2
     log_every: int = 10
     augment: bool = True
@@ -78,7 +79,7 @@ class TrainSpec:
                    weight_decay=float(cfg["weight_decay"]), grad_clip=float(cfg["grad_clip"]),
                    weights=dict(cfg["loss_weights"]), min_points=int(cfg["min_points"]),
                    max_points=int(cfg["max_points"]), vote_yaw=cfg["vote_yaw"], vote_points=int(cfg["vote_points"]),
-                   min_radius=int(cfg["min_radius"]),
+                   vote_recentre=int(cfg.get("vote_recentre", 0)), min_radius=int(cfg["min_radius"]),
                    log_every=int(cfg["log_every"]), augment=bool(cfg.get("augment", True)),
                    ema_decay=float(cfg.get("ema_decay", 0.0)))
 
@@ -106,7 +107,8 @@ def weak_terms(out: dict, bev, object_sets, run: RunSpec, spec: TrainSpec, loss_
     assignment)."""
     B, _, H, W = out["heatmap"].shape
     objs = weak_objects(object_sets, spec.min_points, spec.max_points, rng)
-    assign = assign_weak(bev, out, objs, run.window, loss_fn, tmpl, spec.vote_yaw, spec.vote_points, gen)
+    assign = assign_weak(bev, out, objs, run.window, loss_fn, tmpl, spec.vote_yaw, spec.vote_points, gen,
+                         recentre=spec.vote_recentre)
     heat = heatmap_target(B, H, W, objs.frame, assign.cell, torch.full((len(objs),), float(radius)),
                           device=out["heatmap"].device)
     al = weak_alignment(out, bev, assign, objs, loss_fn, tmpl)
