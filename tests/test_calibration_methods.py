@@ -285,6 +285,15 @@ def test_tables_use_the_paper_row_and_column_names_and_carry_paired_bootstrap_re
     t3 = plan.table_frame("mccraith_ch5_table3", config, rows["mccraith_ch5_table3"], sweep).ours
     assert list(t3.index) == ["6", "10", "30"] and t3.index.name == "Length (m)"
     assert set(align(t3, paper_table("mccraith_ch5_table3")).index) >= {"6", "10", "30"}
+    # Fig. 1's series table: its note follows the generated caption
+    series = {"frames": [{"scene": "long_000", "gt": g, "ours": o, "road_gt": g} for g, o in ((20.0, 21.0), (40.0, 38.0))],
+              "single_scale": 30.0}
+    cfg_note = {"calibration": {**CAL, "tables": {**CAL["tables"], "mccraith_ch5_fig1": {
+        "series": "long", "note": "why it spans 2x (box {length:g} m)."}}}, "profile": "tiny"}
+    fig1 = plan.table_frame("mccraith_ch5_fig1", cfg_note, rows["mccraith_ch5_fig1"],
+                            {r[1]: series for r in rows["mccraith_ch5_fig1"]})
+    assert fig1.note.endswith("No frame skipped. why it spans 2x (box 30 m)")
+    assert fig1.ours.loc[report.FIG1_GT_ROW, "max/min"] == pytest.approx(2.0)
     fig = report.fig1_table([20.0, 40.0, None], [21.0, 38.0, 30.0], 30.0, road_gt=[20.0, 38.0, 33.0])
     assert fig.loc[report.FIG1_GT_ROW, "max/min"] == pytest.approx(2.0)
     assert fig.loc[report.FIG1_OURS_ROW, "median |x / GT - 1|"] == pytest.approx(0.05)

@@ -157,6 +157,8 @@ def table_frame(table_id: str, config: Mapping, rows: Sequence[tuple], results: 
     if "series" in tcfg:
         (_, run, _), = {r[1]: r for r in rows}.values()
         ours, note = report.series_frame(results[run], cal, config.get("profile"))
+        if tcfg.get("note"):
+            note += ". " + str(tcfg["note"]).format(length=float(cal["length"]), width=float(cal["width"])).rstrip(".")
         return TableFrame(ours, {}, note)
     ours, noise, info = report.method_frame([(label, results[run]) for label, run, _ in rows],
                                             index=VARY_INDEX.get(tcfg.get("vary"), "Method"))

@@ -1,0 +1,54 @@
+"""How much the per-frame GT median-scaling factor of a depth model varies, scene by scene (McCraith ch. 5 Fig. 1;
+run by hand, not a test).
+
+For every scene with saved predictions (results/depth/predictions/<dataset>/<mode>/<scene>.npz) the factor
+median(gt) / median(pred) over the evaluation's valid pixels (`redsup.depth.evaluation`, Garg crop, 1e-3-80 m),
+per frame; prints min / median / max and max / min per scene and over all of them.
+
+    python benchmarks/diag_scale_spread.py --results DIR/results --dataset world_kitti --mode M
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "workflow"))
+
+from redsup.depth import data, evaluation, experiments  # noqa: E402
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--results", required=True)
+    ap.add_argument("--dataset", default="world_kitti")
+    ap.add_argument("--mode", default="M", help="model folder under predictions/<dataset>/ (e.g. M, M/seed1)")
+    ap.add_argument("--camera", default="cam_front")
+    args = ap.parse_args(argv)
+    res = Path(args.results)
+    every = []
+    for path in sorted((res / "depth" / "predictions" / args.dataset / args.mode).glob("*.npz")):
+        with np.load(path) as z:
+            pred = z[z.files[0]]
+        gt = data.read_gt_depth(res / "prepared" / args.dataset / path.stem / f"{args.camera}_depth.npz")
+        scale = []
+        for t in range(len(gt)):
+            mask = evaluation.valid_mask(gt[t], min_depth=1e-3, max_depth=80.0, crop="garg")
+            if mask.any():
+                scale.append(evaluation.median_scale(gt[t], experiments.resize_depth(pred[t], gt[t].shape), mask))
+        s = np.array(scale)
+        every += scale
+        print(f"{path.stem:10s} {len(s):4d} frames: {s.min():.2f} / {np.median(s):.2f} / {s.max():.2f}, "
+              f"max/min {s.max() / s.min():.2f}")
+    a = np.array(every)
+    lo, hi = np.percentile(a, [5, 95])
+    print(f"all {len(a)} frames: {a.min():.2f} / {np.median(a):.2f} / {a.max():.2f}, max/min {a.max() / a.min():.2f}, "
+          f"5-95 % {lo:.1f}-{hi:.1f}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
