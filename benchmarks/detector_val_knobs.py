@@ -29,13 +29,17 @@ DIFFS = ("easy", "moderate", "hard")
 
 
 def val_split(results: Path, cfg: dict, path: Path):
+    """The val scenes' cache, built as rule lidar_detector_split builds train and test (`plan.split_inputs`)."""
     from redsup.lidar_detector.data import build_split, load_split, save_split
+    from redsup.lidar_detector.plan import split_inputs
     if not path.exists():
         ld = cfg["lidar_detector"]
-        scenes = sorted((results / "raw" / ld["dataset"]).glob("val_*"))
-        if not scenes:
+        names = sorted(p.name for p in (results / "raw" / ld["dataset"]).iterdir())
+        inputs = split_inputs(ld, names, "val")
+        if not inputs["scenes"]:
             raise SystemExit(f"no val scenes of {ld['dataset']} under {results / 'raw'}")
-        dets = [results / "prepared" / ld["dataset"] / s.name / f"detections_{ld['level']}.npz" for s in scenes]
+        scenes = [results.parent / p for p in inputs["scenes"]]
+        dets = [results.parent / p for p in inputs["detections"]]
         arrays, report = build_split(scenes, dets, tuple(ld["grid"]["z_range"]), camera=ld["camera"],
                                      min_score=ld["min_score"], min_points=ld["min_points"],
                                      frame_stride=ld["frame_stride"]["test"])

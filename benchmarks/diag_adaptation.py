@@ -92,14 +92,13 @@ def windows(results: Path, run: str, baseline: str, dataset: str, size: int) -> 
     return out
 
 
-def region_maps(scene_dir: Path, camera: str, t: int, crop, shape, moving_speed: float) -> dict[str, np.ndarray]:
+def region_maps(scene_dir: Path, boxes, camera: str, t: int, crop, shape, moving_speed: float) -> dict[str, np.ndarray]:
     """Boolean (h, w) masks at the ground-truth depth's grid: moving car, parked car, rest."""
     inst = sceneio.read_label_png(scene_dir / "gt" / "instance" / camera / sceneio.frame_name(t, "png"))
     top, bottom, left, right = (int(v) for v in crop)
     inst = inst[top:inst.shape[0] - bottom, left:inst.shape[1] - right]
     if inst.shape != tuple(shape):
         raise ValueError(f"{scene_dir}: instance buffer {inst.shape} after the crop, ground truth {shape}")
-    boxes = sceneio.read_boxes(scene_dir / "gt" / "boxes.csv")
     b = boxes[boxes["frame"] == t]
     speed = np.hypot(b["vx"].to_numpy(float), b["vy"].to_numpy(float))
     ids = b["track_id"].to_numpy(int)
@@ -151,7 +150,7 @@ def main(argv=None) -> int:
     scene_dirs = sorted((res / "raw" / dataset).glob(f"{args.split}_*"))
     if not scene_dirs:
         raise SystemExit(f"no {args.split} scenes under {res / 'raw' / dataset}")
-    seqs, crops = [], []
+    seqs, crops, boxes = [], [], []
     for sd in scene_dirs:
         prep = res / "prepared" / dataset / sd.name
         stereo = prep / "cam_front_right.npz" if "stereo" in args.sources else None
@@ -161,6 +160,7 @@ def main(argv=None) -> int:
         seqs.append(experiments.EvalSequence(seq, data.read_gt_depth(prep / f"{camera}_depth.npz")))
         with np.load(prep / f"{camera}_depth.npz") as z:
             crops.append(z["crop"])
+        boxes.append(sceneio.read_boxes(sd / "gt" / "boxes.csv"))
     metric_scale = float(meta.get("stereo_scale_factor", 1.0)) if "stereo" in meta.get("sources", ()) else False
     if metric_scale is not False:
         print("note: a stereo-trained model: the table uses its fixed metric scale; the region split here uses "
@@ -178,9 +178,9 @@ def main(argv=None) -> int:
         if isinstance(batch, str):
             print("skip:", batch)
             continue
-        regions = region_maps(scene_dirs[i], camera, t, crops[i], es.gt[t].shape, args.moving_speed)
+        regions = region_maps(scene_dirs[i], boxes[i], camera, t, crops[i], es.gt[t].shape, args.moving_speed)
         adaptation.load_snapshot(models, state)
-        loss_fn = experiments._loss_fn(loss_kwargs, 1000 * i + t)   # the table runs' loss and noise seed
+        loss_fn = experiments.frame_loss(loss_kwargs, 1000 * i + t)   # as the table runs: loss and noise seed
         per_step = {}
 
         def on_step(step, loss, elapsed, es=es, t=t, batch=batch, regions=regions, loss_fn=loss_fn,

@@ -36,15 +36,9 @@ sys.path.insert(0, str(ROOT / "workflow"))
 from redsup.det3d import boxes as B  # noqa: E402
 from redsup.det3d import kitti_eval  # noqa: E402
 from redsup.det3d.kitti_pixels import kitti_pixel_scale  # noqa: E402
+from redsup.prep.boxes3d import points_in_box  # noqa: E402
 
 MEDIAN_BINS = (0.0, 0.4, 0.8, 1.2, 1.6, np.inf)
-
-
-def local_xy(points: np.ndarray, box: np.ndarray) -> np.ndarray:
-    """(n, 3) points in the box's frame (x along its heading), box = (x, y, z, l, w, h, yaw)."""
-    c, s = np.cos(box[6]), np.sin(box[6])
-    q = points[:, :3] - box[:3]
-    return np.stack([q[:, 0] * c + q[:, 1] * s, -q[:, 0] * s + q[:, 1] * c, q[:, 2]], axis=-1)
 
 
 def difficulty(t) -> np.ndarray:
@@ -69,7 +63,7 @@ def matched_sets(t) -> list[tuple[int, np.ndarray]]:
         cand = np.nonzero(t["gt_frame"] == t["obj_frame"][o])[0]
         if len(pts) < 3 or not len(cand):
             continue
-        inside = [int(np.all(np.abs(local_xy(pts, g[c])) <= g[c, 3:6] / 2 + 0.5, axis=1).sum()) for c in cand]
+        inside = [int(points_in_box(pts, g[c], 0.5).sum()) for c in cand]
         if max(inside) >= 3:
             out.append((int(cand[int(np.argmax(inside))]), pts))
     return out
@@ -112,7 +106,7 @@ def sic_optimum(t, sets, template, alpha: float, beta: float) -> np.ndarray:
         trans = np.stack([c[0] + rr * ray[0], c[1] + rr * ray[1], np.full(rr.size, c[2])], axis=-1)
         d = distance_to_template(template, torch.tensor(pts[None, :, :3], dtype=torch.float64), torch.tensor(trans),
                                  torch.tensor(g[gi, 6] + yy))
-        inl = np.all(np.abs(local_xy(pts, g[gi])) <= g[gi, 3:6] / 2 + 0.2, axis=1)
+        inl = points_in_box(pts, g[gi], 0.2)
         row = []
         for sel in (np.ones(len(pts), bool), inl):
             if sel.sum() < 3:
@@ -130,7 +124,6 @@ def real_kitti(realdata: Path) -> list[dict]:
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from bench_inmask_outliers import real_records
 
-    from redsup.prep.boxes3d import points_in_box
     with tempfile.TemporaryDirectory() as tmp:
         recs = real_records(realdata, Path(tmp), 0.0, keep_points=True)
     out = []

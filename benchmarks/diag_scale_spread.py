@@ -2,8 +2,8 @@
 run by hand, not a test).
 
 For every scene with saved predictions (results/depth/predictions/<dataset>/<mode>/<scene>.npz) the factor
-median(gt) / median(pred) over the evaluation's valid pixels (`redsup.depth.evaluation`, Garg crop, 1e-3-80 m),
-per frame; prints min / median / max and max / min per scene and over all of them.
+median(gt) / median(pred) per frame, as Fig. 1 computes it (`redsup.calib.methods.gt_scales` with
+`calibration.eval` of the config); prints min / median / max and max / min per scene and over all of them.
 
     python benchmarks/diag_scale_spread.py --results DIR/results --dataset world_kitti --mode M
 """
@@ -18,7 +18,9 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "workflow"))
 
-from redsup.depth import data, evaluation, experiments  # noqa: E402
+from redsup import config as rconfig  # noqa: E402
+from redsup.calib.inputs import load_scene  # noqa: E402
+from redsup.calib.methods import gt_scales  # noqa: E402
 
 
 def main(argv=None) -> int:
@@ -27,18 +29,15 @@ def main(argv=None) -> int:
     ap.add_argument("--dataset", default="world_kitti")
     ap.add_argument("--mode", default="M", help="model folder under predictions/<dataset>/ (e.g. M, M/seed1)")
     ap.add_argument("--camera", default="cam_front")
+    ap.add_argument("--config", default=str(ROOT / "config.yaml"))
+    ap.add_argument("--profile", default="default")
     args = ap.parse_args(argv)
+    eval_kw = rconfig.load(args.config, {"profile": args.profile})["calibration"]["eval"]
     res = Path(args.results)
     every = []
     for path in sorted((res / "depth" / "predictions" / args.dataset / args.mode).glob("*.npz")):
-        with np.load(path) as z:
-            pred = z[z.files[0]]
-        gt = data.read_gt_depth(res / "prepared" / args.dataset / path.stem / f"{args.camera}_depth.npz")
-        scale = []
-        for t in range(len(gt)):
-            mask = evaluation.valid_mask(gt[t], min_depth=1e-3, max_depth=80.0, crop="garg")
-            if mask.any():
-                scale.append(evaluation.median_scale(gt[t], experiments.resize_depth(pred[t], gt[t].shape), mask))
+        scene = load_scene(path, res / "prepared" / args.dataset / path.stem / f"{args.camera}_depth.npz")
+        scale = [r for r, _ in gt_scales(scene, **eval_kw) if r is not None]
         s = np.array(scale)
         every += scale
         print(f"{path.stem:10s} {len(s):4d} frames: {s.min():.2f} / {np.median(s):.2f} / {s.max():.2f}, "

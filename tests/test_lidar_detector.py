@@ -444,6 +444,7 @@ def test_plan_rows_read_the_lifting_full_method_and_share_runs():
     scenes = ["train_000", "train_001", "test_000", "long_000"]
     assert plan.split_scenes(scenes, "train") == ["train_000", "train_001", "long_000"]
     assert plan.split_scenes(scenes, "test") == ["test_000"]
+    assert plan.split_scenes(scenes + ["val_000"], "val") == ["val_000"]     # knobs are chosen on it
     assert plan.split_inputs(config["lidar_detector"], scenes, "test") == {
         "scenes": ["results/raw/world_kitti/test_000"],
         "detections": ["results/prepared/world_kitti/test_000/detections_cityscapes.npz"]}

@@ -20,6 +20,7 @@ from torch import nn
 
 from redsup.depth import adaptation, data, evaluation, networks, pipeline, systems
 from redsup.depth.configs import EvalSpec
+from redsup.runlog import cpu_model
 
 def select_frames(n_frames: int, spec: Mapping) -> list[int]:
     """Frames ``offset, offset + stride, ...`` (at most ``max_per_sequence`` of them; null = all)."""
@@ -121,7 +122,9 @@ def _record(seq: EvalSequence, t: int, step: int, ev: evaluation.FrameEval | Non
     return rec
 
 
-def _loss_fn(loss_kwargs: Mapping, seed: int) -> Callable:
+def frame_loss(loss_kwargs: Mapping, seed: int) -> Callable:
+    """The adaptation loss of one test frame (`pipeline.batch_loss` with the depth config's settings); its
+    identity-noise generator is seeded with ``seed`` (1000 x sequence + frame in the runners)."""
     kw = dict(loss_kwargs)
     if kw.get("noise_std", 0) > 0:
         kw["generator"] = torch.Generator().manual_seed(seed)
@@ -167,7 +170,7 @@ def run_instance(models: Mapping[str, nn.Module], meta: Mapping, seqs: Seq[EvalS
                     m.eval()
                 on_step(0, None, 0.0)
             else:
-                hist = adaptation.adapt(models, _loss_fn(loss_kwargs, 1000 * i + t), batch, params, lr, n_steps,
+                hist = adaptation.adapt(models, frame_loss(loss_kwargs, 1000 * i + t), batch, params, lr, n_steps,
                                         on_step)
                 loss_sum += np.nan_to_num(np.asarray(hist, dtype=float), nan=0.0, posinf=0.0)
                 loss_n += 1
@@ -202,7 +205,7 @@ def run_sequential(models: Mapping[str, nn.Module], meta: Mapping, seqs: Seq[Eva
                     records.append(_record(es, t, steps, None, None, batch))
                     continue
                 start = time.perf_counter()
-                hist = adaptation.adapt(models, _loss_fn(loss_kwargs, 1000 * i + t), batch, params, lr, steps)
+                hist = adaptation.adapt(models, frame_loss(loss_kwargs, 1000 * i + t), batch, params, lr, steps)
                 pred = _predict(models, batch, meta)
                 secs = time.perf_counter() - start
                 losses += hist
@@ -261,15 +264,11 @@ def validation_metrics(models, meta: Mapping, seqs: Seq[EvalSequence], eval_cfg:
 
 def timing_context(threads: int, size: tuple[int, int], device: str = "cpu") -> dict:
     """Where the per-frame seconds were measured: the device in words, torch threads and the input size."""
-    name = "CPU"
     if str(device).startswith("cuda") and torch.cuda.is_available():
         name = torch.cuda.get_device_name()
     else:
-        try:
-            with open("/proc/cpuinfo") as f:
-                name = next((ln.split(":", 1)[1].strip() for ln in f if ln.startswith("model name")), "CPU")
-        except OSError:
-            pass
+        name = cpu_model()
+        name = "CPU" if name == "unknown" else name
     return {"device": name, "threads": int(threads), "height": int(size[0]), "width": int(size[1])}
 
 

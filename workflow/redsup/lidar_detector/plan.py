@@ -21,12 +21,12 @@ from redsup.tables.contract import parse_run, run_id, training_seed  # noqa: F40
 
 from redsup.lifting import plan as lifting_plan
 
-SPLIT_PREFIXES = {"train": ("train_", "long_"), "test": ("test_",)}
+SPLIT_PREFIXES = {"train": ("train_", "long_"), "val": ("val_",), "test": ("test_",)}   # val: knobs (benchmarks)
 LIFTING = "lifting:"          # prefix of the ch. 6 runs a table row reads
 
 
 def split_scenes(scenes: list[str], split: str) -> list[str]:
-    """Scenes of a split: train = the train and long scenes, test = the test scenes."""
+    """Scenes of a split: train = the train and long scenes, val = the val scenes, test = the test scenes."""
     return [s for s in scenes if s.startswith(SPLIT_PREFIXES[split])]
 
 
