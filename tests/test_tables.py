@@ -278,6 +278,25 @@ def test_constant_tables_reproduce_no_order_or_best_claim():
     assert n_close >= 5
 
 
+def test_listed_claims_say_whether_they_hold_on_our_data():
+    """A data description (listed, not counted) keeps its category, and its evidence says whether the
+    statement is true of our numbers: Medium 247 < Far 345 in ch. 3 Table I does not hold; 300 > 200 does."""
+    far_heavy = pd.DataFrame({"Near": [114.0, 30.0], "Medium": [247.0, 61.0], "Far": [345.0, 109.0],
+                              "Total": [706.0, 200.0]}, index=["Train", "Test"])
+    res = {c["text"][:6]: c for c in evaluate_claims("mccraith_ch3_table1", far_heavy)}
+    medium, sizes = res["Medium"], res["The tr"]
+    assert medium["verdict"] == sizes["verdict"] == "data description"
+    assert "; does not hold on our data (measured: Train [Medium] 247 < Train [Far] 345" in medium["evidence"]
+    assert "the split sizes are configuration (velocity_clips.splits); holds on our data (measured:" \
+        in sizes["evidence"]
+    medium_heavy = far_heavy.assign(Medium=[400.0, 150.0])
+    res = {c["text"][:6]: c for c in evaluate_claims("mccraith_ch3_table1", medium_heavy)}
+    assert "; holds on our data (measured:" in res["Medium"]["evidence"]
+    no_check = [{"text": "listed without checks", "category": "not_testable", "reason": "a visual statement"}]
+    c = evaluate_claims("mccraith_ch3_table1", far_heavy, extra_claims=no_check)[-1]
+    assert c["verdict"] == "not testable" and c["evidence"] == "a visual statement (measured: not machine-checked)"
+
+
 def test_identical_cells_without_spread_do_not_show_closeness():
     """Two rows both at 0 AP with no spread (a floor: nothing detected) are not evidence that they are
     close; 60.0 vs 60.5 or 60.0 vs 60.0 as single values inside the tolerance are."""

@@ -8,7 +8,8 @@ other side, ``inconclusive`` when it contains zero (a tie is never a win) or a c
 A claim's verdict is one of VERDICTS: the three above, plus ``not testable`` (the claim is about prior work
 whose rows have no value of ours, a property of real data, or a claim the thesis' own table contradicts:
 ``paper_inconsistent``) and ``data description`` (it holds by how the data were configured) — neither of
-the last two is counted as a result.
+the last two is counted as a result. A listed claim with checks still says whether its statement holds on our
+data (a data description the world does not share is not hidden behind its category).
 """
 from __future__ import annotations
 
@@ -289,6 +290,11 @@ def _combine(results: list[tuple[str, str]]) -> tuple[str, str]:
     return verdict, "; ".join(e for _, e in results)
 
 
+# a listed (uncounted) claim's own checks still say whether its statement is true of our data
+_ON_OUR_DATA = {REPRODUCES: "holds on our data", CONTRADICTED: "does not hold on our data",
+                INCONCLUSIVE: "undecided on our data (inside the noise or a cell missing)"}
+
+
 def _evaluate(claims, table: pd.DataFrame, directions, headline, noise=None, literature=()) -> list[dict]:
     cells = _Cells(table, directions, noise, literature)
     out = []
@@ -307,8 +313,9 @@ def _evaluate(claims, table: pd.DataFrame, directions, headline, noise=None, lit
         verdict, evidence = _combine([evaluate_check(c, cells, headline) for c in checks]) if checks else \
             (INCONCLUSIVE, "not machine-checked")
         if category:
+            held = _ON_OUR_DATA.get(verdict) if checks else None
             verdict = CATEGORIES[category]
-            evidence = f"{claim.get('reason', '')} (measured: {evidence})".strip()
+            evidence = "; ".join(p for p in (claim.get("reason", ""), held) if p) + f" (measured: {evidence})"
         elif claim.get("paper_inconsistent"):
             verdict = NOT_TESTABLE
             evidence = f"the thesis' own table disagrees with its text: {claim['paper_inconsistent']} " \
