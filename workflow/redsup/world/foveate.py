@@ -145,16 +145,17 @@ def radiance_foveated(cam: Camera, T_world_cam: np.ndarray, prims: Prims, view, 
     instance = np.zeros((H, W), np.uint16)         # every car lies inside a window: none is drawn coarse
     windows = car_windows(cam, T_world_cam, prims, margin, render_distance, tile)
     parts = []
-    sky = None
+    frame_sky = []            # the sky as the full frame interpolates it (its grid is anchored at the corner)
+
+    def window_sky(r0, r1, c0, c1):
+        if not frame_sky:     # computed once a frame, when a window first needs it
+            frame_sky.append(sky_image(cam, T_world_cam, view.style).reshape(H, W, 3))
+        return frame_sky[0][r0:r1, c0:c1].reshape(-1, 3)
+
     for r0, r1, c0, c1 in windows:
         win = radiance(crop_camera(cam, r0, r1, c0, c1), T_world_cam, prims, view, appearance, render_distance,
-                       fog_distance)
-        lin = win["linear"].reshape(r1 - r0, c1 - c0, 3)
-        up = win["label"] == SKY
-        if up.any():          # the sky as the full frame interpolates it (its grid is anchored at the corner)
-            sky = sky_image(cam, T_world_cam, view.style).reshape(H, W, 3) if sky is None else sky
-            lin[up] = sky[r0:r1, c0:c1][up]
-        linear[r0:r1, c0:c1] = lin
+                       fog_distance, sky=lambda r0=r0, r1=r1, c0=c0, c1=c1: window_sky(r0, r1, c0, c1))
+        linear[r0:r1, c0:c1] = win["linear"].reshape(r1 - r0, c1 - c0, 3)
         near["label"][r0:r1, c0:c1] = win["label"]
         near["depth"][r0:r1, c0:c1] = win["depth"]
         instance[r0:r1, c0:c1] = win["instance"]

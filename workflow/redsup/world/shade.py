@@ -172,9 +172,11 @@ def render_camera(cam, T_world_cam: np.ndarray, prims: Prims, view: SceneView, a
 
 
 def radiance(cam, T_world_cam: np.ndarray, prims: Prims, view: SceneView, appearance: dict,
-             render_distance: float, fog_distance: float) -> dict:
+             render_distance: float, fog_distance: float, sky=None) -> dict:
     """Cast and shade one camera's pixel grid: dict(linear (H*W, 3) float32 colour before the domain look, label,
-    instance, depth (H, W), hits, pairs)."""
+    instance, depth (H, W), hits, pairs). Rays that hit nothing take ``sky_image`` of ``cam``, or with ``sky`` (a
+    function of no argument returning (H*W, 3) colours) that: a window of a larger frame passes the frame's own
+    sky (``foveate``), so the sky is not computed twice."""
     hits, pairs, dirs = cast(cam, T_world_cam, prims, view.road, render_distance)
     origin = T_world_cam[:3, 3]
     n = cam.n_rays
@@ -198,7 +200,7 @@ def radiance(cam, T_world_cam: np.ndarray, prims: Prims, view: SceneView, appear
     rgb = np.empty((n, 3), np.float32)
     rgb[idx] = col
     if len(idx) < n:
-        rgb[~ok] = sky_image(cam, T_world_cam, view.style)[~ok]
+        rgb[~ok] = (sky_image(cam, T_world_cam, view.style) if sky is None else sky())[~ok]
     label = np.full(n, textures.SKY, np.uint8)
     label[idx] = surf.label
     instance = np.zeros(n, np.uint16)
