@@ -278,14 +278,23 @@ def test_constant_tables_reproduce_no_order_or_best_claim():
     assert n_close >= 5
 
 
-def test_listed_claims_say_whether_they_hold_on_our_data():
+def test_listed_claims_say_whether_they_hold_on_our_data(tmp_path):
     """A data description (listed, not counted) keeps its category, and its evidence says whether the
-    statement is true of our numbers: Medium 247 < Far 345 in ch. 3 Table I does not hold; 300 > 200 does."""
+    statement is true of our numbers: Medium 247 < Far 345 in ch. 3 Table I does not hold; 706 > 200 does.
+    The scorecard lists the ones that do not hold."""
     far_heavy = pd.DataFrame({"Near": [114.0, 30.0], "Medium": [247.0, 61.0], "Far": [345.0, 109.0],
                               "Total": [706.0, 200.0]}, index=["Train", "Test"])
     res = {c["text"][:6]: c for c in evaluate_claims("mccraith_ch3_table1", far_heavy)}
     medium, sizes = res["Medium"], res["The tr"]
     assert medium["verdict"] == sizes["verdict"] == "data description"
+    assert (medium["on_our_data"], sizes["on_our_data"]) == ("does not hold on our data", "holds on our data")
+    write_table("mccraith_ch3_table1", far_heavy.reset_index(names="split"), tmp_path / "t.md", tmp_path / "t.csv",
+                tmp_path / "t.tex")
+    result = write_scorecard([tmp_path / "mccraith_ch3_table1.score.json"], tmp_path / "scorecard.md")
+    assert result["counts"]["data_description"] == 2 and result["counts"]["contradicted"] == 0
+    assert result["listed_not_holding"] == [("mccraith_ch3_table1", medium["text"])]
+    assert ("Listed (uncounted) claims that do not hold on our data: mccraith_ch3_table1: Medium-range vehicles"
+            in (tmp_path / "scorecard.md").read_text())
     assert "; does not hold on our data (measured: Train [Medium] 247 < Train [Far] 345" in medium["evidence"]
     assert "the split sizes are configuration (velocity_clips.splits); holds on our data (measured:" \
         in sizes["evidence"]

@@ -316,6 +316,8 @@ def _evaluate(claims, table: pd.DataFrame, directions, headline, noise=None, lit
             held = _ON_OUR_DATA.get(verdict) if checks else None
             verdict = CATEGORIES[category]
             evidence = "; ".join(p for p in (claim.get("reason", ""), held) if p) + f" (measured: {evidence})"
+            if held:
+                base["on_our_data"] = held
         elif claim.get("paper_inconsistent"):
             verdict = NOT_TESTABLE
             evidence = f"the thesis' own table disagrees with its text: {claim['paper_inconsistent']} " \

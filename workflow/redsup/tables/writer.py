@@ -332,6 +332,8 @@ def write_scorecard(score_jsons: Iterable[str | Path], out_md, registry: dict | 
     taus = [s["kendall_tau"] for s in scores if s["kendall_tau"] is not None]
     paper_bad = [(s["table_id"], c["text"]) for s in scores for c in s["claims"]
                  if c["verdict"] in VERDICTS[:3] and c.get("verdict_on_paper") not in (None, "reproduces")]
+    listed_false = [(s["table_id"], c["text"]) for s in scores for c in s["claims"]
+                    if c.get("on_our_data", "").startswith("does not hold")]
     tested = total["reproduces"] + total["inconclusive"] + total["contradicted"]
     head = " | ".join(VERDICTS)
     md = ["# Scorecard: paper vs ours", "",
@@ -359,6 +361,9 @@ def write_scorecard(score_jsons: Iterable[str | Path], out_md, registry: dict | 
     if paper_bad:
         md += ["", "Counted claims that do not reproduce on the paper's own numbers (transcription check): "
                + "; ".join(f"{t}: {x}" for t, x in paper_bad) + "."]
+    if listed_false:
+        md += ["", "Listed (uncounted) claims that do not hold on our data: "
+               + "; ".join(f"{t}: {x}" for t, x in listed_false) + "."]
     md += ["", "## Claims", ""]
     for s in scores:
         if not s["claims"]:
@@ -371,4 +376,4 @@ def write_scorecard(score_jsons: Iterable[str | Path], out_md, registry: dict | 
     Path(out_md).parent.mkdir(parents=True, exist_ok=True)
     Path(out_md).write_text("\n".join(md))
     return {"tables": len(scores), "counts": total, "by_stage": by_stage, "paper_not_reproducing": paper_bad,
-            "not_built": missing}
+            "listed_not_holding": listed_false, "not_built": missing}
