@@ -301,9 +301,13 @@ def test_listed_claims_say_whether_they_hold_on_our_data(tmp_path):
     medium_heavy = far_heavy.assign(Medium=[400.0, 150.0])
     res = {c["text"][:6]: c for c in evaluate_claims("mccraith_ch3_table1", medium_heavy)}
     assert "; holds on our data (measured:" in res["Medium"]["evidence"]
-    no_check = [{"text": "listed without checks", "category": "not_testable", "reason": "a visual statement"}]
-    c = evaluate_claims("mccraith_ch3_table1", far_heavy, extra_claims=no_check)[-1]
+    no_check = [{"text": "listed without checks", "category": "not_testable", "reason": "a visual statement"},
+                {"text": "not testable, checked", "category": "not_testable", "reason": "about prior work",
+                 "check": {"type": "order", "better": "Train", "worse": "Test", "metric": "Total"}}]
+    c, d = evaluate_claims("mccraith_ch3_table1", far_heavy, extra_claims=no_check)[-2:]
     assert c["verdict"] == "not testable" and c["evidence"] == "a visual statement (measured: not machine-checked)"
+    assert d["verdict"] == "not testable" and "on_our_data" not in d    # its checks cannot decide it
+    assert d["evidence"].startswith("about prior work (measured: Total: Train 706 > Test 200")
 
 
 def test_identical_cells_without_spread_do_not_show_closeness():

@@ -8,8 +8,9 @@ other side, ``inconclusive`` when it contains zero (a tie is never a win) or a c
 A claim's verdict is one of VERDICTS: the three above, plus ``not testable`` (the claim is about prior work
 whose rows have no value of ours, a property of real data, or a claim the thesis' own table contradicts:
 ``paper_inconsistent``) and ``data description`` (it holds by how the data were configured) — neither of
-the last two is counted as a result. A listed claim with checks still says whether its statement holds on our
-data (a data description the world does not share is not hidden behind its category).
+the last two is counted as a result. A data description with checks still says whether it holds on our data
+(one the world does not share is not hidden behind its category); a not-testable claim's checks are shown as
+measured, since they cannot decide it.
 """
 from __future__ import annotations
 
@@ -290,7 +291,7 @@ def _combine(results: list[tuple[str, str]]) -> tuple[str, str]:
     return verdict, "; ".join(e for _, e in results)
 
 
-# a listed (uncounted) claim's own checks still say whether its statement is true of our data
+# a data description's own checks still say whether its statement is true of our data
 _ON_OUR_DATA = {REPRODUCES: "holds on our data", CONTRADICTED: "does not hold on our data",
                 INCONCLUSIVE: "undecided on our data (inside the noise or a cell missing)"}
 
@@ -313,7 +314,7 @@ def _evaluate(claims, table: pd.DataFrame, directions, headline, noise=None, lit
         verdict, evidence = _combine([evaluate_check(c, cells, headline) for c in checks]) if checks else \
             (INCONCLUSIVE, "not machine-checked")
         if category:
-            held = _ON_OUR_DATA.get(verdict) if checks else None
+            held = _ON_OUR_DATA.get(verdict) if checks and category == "data_description" else None
             verdict = CATEGORIES[category]
             evidence = "; ".join(p for p in (claim.get("reason", ""), held) if p) + f" (measured: {evidence})"
             if held:
