@@ -2,6 +2,8 @@
 glass pass-through, ground truth, determinism, the canonical scene format and the velocity clips."""
 import copy
 import json
+import os
+import shutil
 from pathlib import Path
 
 import cv2
@@ -476,6 +478,54 @@ def test_true_distances_end_at_the_annotated_position(cfg, tmp_path):
         assert np.allclose(z[:, -1], [a["position"][0] for a in ann], atol=1e-3)
         n += len(ann)
     assert n >= 2
+
+
+def test_interrupted_clip_split_keeps_its_finished_clips(cfg, tmp_path, monkeypatch):
+    """A split that fails at its third clip leaves no output but keeps clips 1-2; the next attempt renders only
+    clip 3 and writes the same files as an uninterrupted run; other settings discard what was kept."""
+    import redsup.world.clips as clips_mod
+
+    world = copy.deepcopy(cfg["world"])
+    clips = copy.deepcopy(cfg["velocity_clips"])
+    clips.update(width=96, height=54, frames=3)
+    clips["splits"]["train"] = {"clips": 3, "velocity_scale": 1.0}
+    whole = write_clips(world, clips, "train", 5, tmp_path / "whole" / "train")
+
+    rendered, fail = [], [True]
+    real = clips_mod.render_clip
+
+    def flaky(world_cfg, clips_cfg, split, seed, c, folder):
+        if c == 2 and fail:
+            fail.clear()
+            rendered.append("failed")
+            (folder / "imgs").mkdir(parents=True)           # cut off mid-clip
+            raise RuntimeError("killed")
+        rendered.append(c)
+        return real(world_cfg, clips_cfg, split, seed, c, folder)
+
+    monkeypatch.setattr(clips_mod, "render_clip", flaky)
+    out = tmp_path / "run" / "train"
+    with pytest.raises(RuntimeError, match="killed"):
+        write_clips(world, clips, "train", 5, out)
+    partial = tmp_path / "run" / ".train.partial"
+    assert not out.exists() and sorted(p.name for p in (partial / "clips").iterdir()) == [".3.tmp%d" % os.getpid(),
+                                                                                           "1", "2"]
+    again = write_clips(world, clips, "train", 5, out)
+    assert rendered == [0, 1, "failed", 2] and again["kept_clips"] == 2 and whole["kept_clips"] == 0
+    assert not partial.exists()
+    files = sorted(p.relative_to(tmp_path / "whole" / "train") for p in (tmp_path / "whole" / "train").rglob("*")
+                   if p.is_file())
+    assert sorted(p.relative_to(out) for p in out.rglob("*") if p.is_file()) == files
+    for f in files:
+        assert (out / f).read_bytes() == (tmp_path / "whole" / "train" / f).read_bytes(), f
+    assert {k: again[k] for k in ("annotated", "near", "medium", "far", "mean_relative_speed")} == \
+        {k: whole[k] for k in ("annotated", "near", "medium", "far", "mean_relative_speed")}
+
+    rendered.clear()                                         # kept clips under other settings are not reused
+    shutil.copytree(tmp_path / "whole" / "train", partial)
+    (partial / "key.txt").write_text("another renderer\n")
+    assert write_clips(world, clips, "train", 5, out)["kept_clips"] == 0
+    assert rendered == [0, 1, 2] and not partial.exists()
 
 
 def test_clips_render_the_same_files_in_parallel(cfg, tmp_path):

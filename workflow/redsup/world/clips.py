@@ -8,7 +8,9 @@ camera). `calibration.txt`: `fx fy cx cy`, then the camera height.
 """
 from __future__ import annotations
 
+import hashlib
 import json
+import os
 import shutil
 import time
 from concurrent.futures import ProcessPoolExecutor
@@ -17,12 +19,13 @@ from itertools import repeat
 from multiprocessing import get_context
 from pathlib import Path
 
+import cv2
 import numpy as np
 from tqdm import tqdm
 
 from .common import SPLIT_CODES, derive_rng, pose, rotate
 from .foveate import render_foveated
-from .generate import publish, temp_dir_for, write_jpg, write_png
+from .generate import publish, write_jpg, write_png
 from .gt import instance_boxes, own_pixels
 from .motorway import build_motorway, motorway_state
 from .sensors import R_VEHICLE_FRONT, Camera, intrinsics
@@ -100,6 +103,43 @@ def annotate(mw, state, cam: Camera, rendered: dict, ccfg: dict, supersample: in
     return out
 
 
+def partial_key(world_cfg: dict, clips_cfg: dict, split: str, seed: int) -> str:
+    """What a split's finished clips depend on: the world and clip settings, the split and seed, the renderer's
+    source (every module of this package) and the numpy / OpenCV versions (JPEG bytes). A kept partial split
+    is reused only under the same key."""
+    h = hashlib.sha256(json.dumps([world_cfg, clips_cfg, split, seed, np.__version__, cv2.__version__],
+                                  sort_keys=True, default=str).encode())
+    for src in sorted(Path(__file__).parent.glob("*.py")):
+        h.update(src.name.encode() + src.read_bytes())
+    return h.hexdigest()[:20]
+
+
+def open_partial(partial: Path, key: str) -> set[int]:
+    """The finished clips (1-based numbers) kept in ``partial`` from an earlier attempt with the same ``key``;
+    anything else there (another key, a clip cut off mid-render) is removed first. Creates ``partial``."""
+    key_file = partial / "key.txt"
+    if partial.exists() and (not key_file.exists() or key_file.read_text().strip() != key):
+        shutil.rmtree(partial)
+    (partial / "clips").mkdir(parents=True, exist_ok=True)
+    key_file.write_text(key + "\n")
+    done = set()
+    for d in (partial / "clips").iterdir():
+        if d.name.isdigit() and (d / "annotation.json").exists():
+            done.add(int(d.name))
+        else:
+            shutil.rmtree(d)                                # an unfinished clip's temporary folder
+    return done
+
+
+def render_clip_into(world_cfg: dict, clips_cfg: dict, split: str, seed: int, c: int, clips_dir: Path) -> list[dict]:
+    """``render_clip`` into ``clips_dir/.<c + 1>.tmp<pid>``, renamed to ``clips_dir/<c + 1>`` once complete: a
+    clip folder under its number is always whole, so an interrupted split keeps every clip it finished."""
+    tmp = clips_dir / f".{c + 1}.tmp{os.getpid()}"
+    ann = render_clip(world_cfg, clips_cfg, split, seed, c, tmp)
+    tmp.rename(clips_dir / str(c + 1))
+    return ann
+
+
 def render_clip(world_cfg: dict, clips_cfg: dict, split: str, seed: int, c: int, folder: Path) -> list[dict]:
     """Render clip c (0-based) of ``split`` into ``folder`` (``imgs/001.png ...`` and ``annotation.json``);
     returns its annotations. Depends only on (seed, split, c): clips render in any order, in any process."""
@@ -133,7 +173,13 @@ def render_clip(world_cfg: dict, clips_cfg: dict, split: str, seed: int, c: int,
 def write_clips(world_cfg: dict, clips_cfg: dict, split: str, seed: int, out_dir: str | Path,
                 workers: int = 1) -> dict:
     """Render the clips of `split` (a key of clips_cfg['splits']) into out_dir; returns summary numbers.
-    ``workers`` > 1 renders clips in that many processes; the files are the same as with one."""
+    ``workers`` > 1 renders clips in that many processes; the files are the same as with one.
+
+    Nothing is lost on a crash: the clips are rendered into ``.<out_dir name>.partial`` beside ``out_dir``, each
+    clip moved under its number once whole, and that folder becomes ``out_dir`` when the split is complete. A
+    failed or killed attempt leaves no ``out_dir`` but keeps its finished clips there, and the next attempt with
+    the same settings and renderer (``partial_key``) renders only the missing ones (the train split is about half
+    an hour of one core in the default profile); the summary counts every clip either way."""
     if split not in clips_cfg["splits"]:
         raise ValueError(f"unknown clip split {split!r} (have {sorted(clips_cfg['splits'])})")
     if clips_cfg["domain"] not in world_cfg["domains"]:
@@ -145,33 +191,35 @@ def write_clips(world_cfg: dict, clips_cfg: dict, split: str, seed: int, out_dir
     spec = clips_cfg["splits"][split]
     cam = clip_camera(world_cfg, clips_cfg)
     out_dir = Path(out_dir)
-    tmp = temp_dir_for(out_dir)
+    partial = out_dir.parent / f".{out_dir.name}.partial"
+    kept = open_partial(partial, partial_key(world_cfg, clips_cfg, split, seed))
     counts = {"near": 0, "medium": 0, "far": 0}
     speeds, n_ann = [], 0
     n = spec["clips"]
-    try:
-        K = cam.K
-        (tmp / "calibration.txt").write_text(f"{K[0, 0]:.6f} {K[1, 1]:.6f} {K[0, 2]:.6f} {K[1, 2]:.6f}\n"
+    todo = [c for c in range(n) if c + 1 not in kept]
+    if kept:
+        print(f"clips {split}: {n - len(todo)} of {n} clips kept from an interrupted attempt in {partial}")
+    K = cam.K
+    (partial / "calibration.txt").write_text(f"{K[0, 0]:.6f} {K[1, 1]:.6f} {K[0, 2]:.6f} {K[1, 2]:.6f}\n"
                                              f"{clips_cfg['camera_height']:.4f}\n")
-        folders = [tmp / "clips" / str(c + 1) for c in range(n)]
-        parallel = workers > 1 and n > 1
-        lo, hi = clips_cfg["distance_bins"]
-        with (ProcessPoolExecutor(max_workers=min(workers, n), mp_context=get_context("fork")) if parallel
-              else nullcontext()) as pool:
-            rendered = (pool.map if parallel else map)(render_clip, repeat(world_cfg), repeat(clips_cfg),
-                                                       repeat(split), repeat(seed), range(n), folders)
-            for ann in tqdm(rendered, total=n, desc=f"clips {split}", unit="clip", mininterval=5):
-                for a in ann:
-                    z = a["position"][0]
-                    counts["near" if z < lo else "medium" if z < hi else "far"] += 1
-                    speeds.append(np.hypot(*a["velocity"]))
-                n_ann += len(ann)
-        publish(tmp, out_dir)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+    parallel = workers > 1 and len(todo) > 1
+    lo, hi = clips_cfg["distance_bins"]
+    with (ProcessPoolExecutor(max_workers=min(workers, len(todo)), mp_context=get_context("fork")) if parallel
+          else nullcontext()) as pool:
+        rendered = (pool.map if parallel else map)(render_clip_into, repeat(world_cfg), repeat(clips_cfg),
+                                                   repeat(split), repeat(seed), todo, repeat(partial / "clips"))
+        anns = (next(rendered) if c + 1 not in kept else
+                json.loads((partial / "clips" / str(c + 1) / "annotation.json").read_text()) for c in range(n))
+        for ann in tqdm(anns, total=n, desc=f"clips {split}", unit="clip", mininterval=5):
+            for a in ann:
+                z = a["position"][0]
+                counts["near" if z < lo else "medium" if z < hi else "far"] += 1
+                speeds.append(np.hypot(*a["velocity"]))
+            n_ann += len(ann)
+    (partial / "key.txt").unlink()
+    publish(partial, out_dir)
     return {"clips": n, "annotated": n_ann, "annotated_per_clip": n_ann / max(n, 1),
             "near": counts["near"], "medium": counts["medium"], "far": counts["far"],
             "mean_relative_speed": float(np.mean(speeds)) if speeds else 0.0,
             "velocity_scale": float(spec["velocity_scale"]), "workers": int(workers),
-            "seconds": time.time() - start}
+            "kept_clips": n - len(todo), "seconds": time.time() - start}
