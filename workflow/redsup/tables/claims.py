@@ -292,7 +292,8 @@ def _combine(results: list[tuple[str, str]]) -> tuple[str, str]:
 
 
 # a data description's own checks still say whether its statement is true of our data
-_ON_OUR_DATA = {REPRODUCES: "holds on our data", CONTRADICTED: "does not hold on our data",
+DOES_NOT_HOLD = "does not hold on our data"
+_ON_OUR_DATA = {REPRODUCES: "holds on our data", CONTRADICTED: DOES_NOT_HOLD,
                 INCONCLUSIVE: "undecided on our data (inside the noise or a cell missing)"}
 
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import pandas as pd
 
 from redsup.tables import noise as noise_lib
-from redsup.tables.claims import (VERDICTS, align_noise, count_verdicts, evaluate_claims,
+from redsup.tables.claims import (DOES_NOT_HOLD, VERDICTS, align_noise, count_verdicts, evaluate_claims,
                                   evaluate_claims_on_paper, headline_tau)
 from redsup.tables.registry import (align, as_frame, load_registry, paper_table, paper_values,
                                     table_info)
@@ -333,7 +333,7 @@ def write_scorecard(score_jsons: Iterable[str | Path], out_md, registry: dict | 
     paper_bad = [(s["table_id"], c["text"]) for s in scores for c in s["claims"]
                  if c["verdict"] in VERDICTS[:3] and c.get("verdict_on_paper") not in (None, "reproduces")]
     listed_false = [(s["table_id"], c["text"]) for s in scores for c in s["claims"]
-                    if c.get("on_our_data", "").startswith("does not hold")]
+                    if c.get("on_our_data") == DOES_NOT_HOLD]
     tested = total["reproduces"] + total["inconclusive"] + total["contradicted"]
     head = " | ".join(VERDICTS)
     md = ["# Scorecard: paper vs ours", "",

@@ -23,6 +23,8 @@ import cv2
 import numpy as np
 from tqdm import tqdm
 
+from redsup.config import config_hash
+
 from .common import SPLIT_CODES, derive_rng, pose, rotate
 from .foveate import render_foveated
 from .generate import publish, write_jpg, write_png
@@ -107,11 +109,11 @@ def partial_key(world_cfg: dict, clips_cfg: dict, split: str, seed: int) -> str:
     """What a split's finished clips depend on: the world and clip settings, the split and seed, the renderer's
     source (every module of this package) and the numpy / OpenCV versions (JPEG bytes). A kept partial split
     is reused only under the same key."""
-    h = hashlib.sha256(json.dumps([world_cfg, clips_cfg, split, seed, np.__version__, cv2.__version__],
-                                  sort_keys=True, default=str).encode())
-    for src in sorted(Path(__file__).parent.glob("*.py")):
-        h.update(src.name.encode() + src.read_bytes())
-    return h.hexdigest()[:20]
+    settings = config_hash({"world": world_cfg, "velocity_clips": clips_cfg, "split": split, "seed": seed,
+                            "numpy": np.__version__, "opencv": cv2.__version__})
+    source = hashlib.sha256(b"".join(src.name.encode() + src.read_bytes()
+                                     for src in sorted(Path(__file__).parent.glob("*.py"))))
+    return f"{settings}-{source.hexdigest()[:12]}"
 
 
 def open_partial(partial: Path, key: str) -> set[int]:
