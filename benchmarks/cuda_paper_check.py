@@ -183,13 +183,14 @@ def depth_case(cfg: dict, dataset: str, mode: str, args, device: torch.device) -
                                               d["eval"]["frames"].get("val", d["eval"]["frames"]["all"]))
 
     clock = StepClock(device)
+    automask_after = int(tcfg.get("automask_after", 0))
+    criterion = systems.criterion(meta, kw, steps, seed, automask_after)
     summary = training.train(models, seqs, sources, steps=args.steps, batch_size=batch, lr=float(tcfg["lr"]),
                              decay_at=tcfg["decay_at"], gamma=float(tcfg["gamma"]), flip=tcfg["flip"],
                              min_speed=tcfg["min_speed"], seed=seed, loss_kwargs=kw,
                              callback=lambda step, terms: clock.tick(terms["loss"]), device=args.device,
-                             criterion=systems.criterion(meta, kw, steps, seed),
-                             validate=validate if int(tcfg["epochs"]) > 0 else None,
-                             validate_every=0, automask_after=int(tcfg.get("automask_after", 0)))
+                             criterion=criterion, validate=validate if int(tcfg["epochs"]) > 0 else None,
+                             validate_every=0, automask_after=automask_after if criterion is None else 0)
     last = summary.get("validation", [{}])[-1]
     return {"input": f"{batch}x3x{h}x{w}", "batch": batch, "params": n_params(models), "parity": par,
             **clock.result(steps), "validation": {k: last[k] for k in ("abs_rel", "n_frames") if k in last} or None}

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from redsup.depth import checkpoint, data, experiments, featdepth, manydepth, networks, reporting, systems, training
+from redsup.depth import checkpoint, data, experiments, featdepth, losses, manydepth, networks, reporting, systems, training
 from redsup.depth.configs import EvalSpec, Row, train_settings
 
 torch.set_num_threads(1)
@@ -132,6 +132,53 @@ def test_train_settings_override_per_system():
     assert systems.input_size((64, 208), 0.5) == (32, 104)
     assert isinstance(systems.build({**model, "height": 1, "width": 1, "mode": "M"})["depth_encoder"],
                       networks.ResNetEncoder)
+
+
+def test_systems_start_auto_masking_at_a_fraction_of_their_steps():
+    """depth.systems.<system>.automask_at is a fraction of the model's steps (so the paper profile's 20000 steps
+    keep the same schedule); a mode's automask_after (steps) overrides it; without either it is 0."""
+    cfg = {"model": {"base_channels": 16, "num_scales": 4, "min_depth": 0.1, "max_depth": 100.0},
+           "train": {"steps": 600, "batch_size": 4, "lr": 1e-4, "decay_at": 0.75, "gamma": 0.1},
+           "modes": {"MD": {"sources": ["prev", "next"], "cameras": ["cam_front"], "system": "manydepth"},
+                     "FD": {"sources": ["prev", "next"], "cameras": ["cam_front"], "system": "featdepth",
+                            "automask_after": 7},
+                     "M": {"sources": ["prev", "next"], "cameras": ["cam_front"]}},
+           "systems": {"manydepth": {"steps": 300, "automask_at": 0.333}, "featdepth": {"automask_at": 0.5}},
+           "models": [{"dataset": "b", "mode": "MD", "steps": 30}]}
+    assert train_settings(cfg, "a", "MD")[1]["automask_after"] == 100        # round(0.333 x 300)
+    assert train_settings(cfg, "b", "MD")[1]["automask_after"] == 10         # round(0.333 x 30)
+    assert train_settings(cfg, "a", "FD")[1]["automask_after"] == 7          # the mode's steps win
+    assert train_settings(cfg, "a", "M")[1]["automask_after"] == 0
+
+
+def test_system_criteria_keep_every_pixel_until_auto_masking_starts():
+    """Each system's criterion passes automasking=False to its Monodepth2 losses up to step automask_after, so
+    every pixel is in the loss (Feature Depth's automask_fraction is then exactly 1; Manydepth's multi-frame
+    fraction is its reliable share, 1 - unreliable_fraction); auto-masking drops pixels from the next step on."""
+    assert losses.masking_at({"automasking": True, "alpha": 0.85}, 3, 3) == {"automasking": False, "alpha": 0.85}
+    assert losses.masking_at({"automasking": True, "alpha": 0.85}, 4, 3) == {"automasking": True, "alpha": 0.85}
+    assert losses.masking_at({"automasking": True}, 1, 0) == {"automasking": True}
+    torch.manual_seed(0)
+    g = torch.Generator().manual_seed(1)
+    b, h, w = 2, 32, 48
+    K = torch.tensor([[40.0, 0.0, 23.5], [0.0, 40.0, 15.5], [0.0, 0.0, 1.0]]).expand(b, 3, 3).clone()
+    prev = torch.rand(b, 3, h, w, generator=g)
+    batch = {"target": prev.clone(), "K": K, "sources": {"prev": prev, "next": torch.rand(b, 3, h, w, generator=g)}}
+    batch["target"][:, :, :, : w // 2] = torch.rand(b, 3, h, w // 2, generator=g)   # half the image is static
+    meta = {"system": "featdepth", "alpha": 1e-3, "beta": 1e-3, "feature_weight": 1.0}
+    crit = systems.criterion(meta, {"automasking": True, "noise_std": 0.0}, 10, 0, automask_after=2)
+    models = featdepth.build_models(base_channels=4)
+    with torch.no_grad():
+        fractions = [crit(models, batch, step)["automask_fraction"].item() for step in (1, 2, 3)]
+    assert fractions[0] == fractions[1] == 1.0
+    assert fractions[2] < 0.9           # the static half (target == prev: identity error 0) is masked out
+    meta = {"system": "manydepth", "freeze_at": None, "static_prob": 0.0, "zero_prob": 0.0, "consistency_weight": 1.0}
+    crit = systems.criterion(meta, {"automasking": True, "noise_std": 0.0}, 10, 0, automask_after=1)
+    models = manydepth.build_models(base_channels=4, n_bins=4)
+    with torch.no_grad():
+        first, second = crit(models, batch, 1), crit(models, batch, 2)
+    assert first["automask_fraction"].item() == pytest.approx(1.0 - first["unreliable_fraction"].item(), abs=1e-6)
+    assert second["automask_fraction"].item() < 1.0 - second["unreliable_fraction"].item() - 0.1
 
 
 def test_train_settings_mode_recipe_between_base_and_model_entry():

@@ -71,13 +71,14 @@ with child_run(sm.log.run, parent, f"train {sm.wildcards.model}", rule=sm.rule, 
     elif int(tcfg["epochs"]) > 0:
         print("no val scenes: no validation passes, the last step's weights are kept")
 
+    automask_after = int(tcfg.get("automask_after", 0))
+    criterion = systems.criterion(meta, loss_settings(cfg), int(tcfg["steps"]), seed, automask_after)
     summary = training.train(models, seqs, sources, steps=int(tcfg["steps"]), batch_size=int(tcfg["batch_size"]),
                              lr=float(tcfg["lr"]), decay_at=tcfg["decay_at"], gamma=float(tcfg["gamma"]),
                              flip=tcfg["flip"], min_speed=tcfg["min_speed"], seed=seed,
                              loss_kwargs=loss_settings(cfg), callback=log_step, device=device,
-                             criterion=systems.criterion(meta, loss_settings(cfg), int(tcfg["steps"]), seed),
-                             validate=validate, validate_every=val_every,
-                             automask_after=int(tcfg.get("automask_after", 0)))
+                             criterion=criterion, validate=validate, validate_every=val_every,
+                             automask_after=automask_after if criterion is None else 0)
     meta.update(summary)
     if "stereo" in sources:  # metres per network unit: evaluate S / MS with this fixed scale (Monodepth2's 5.4)
         metric = seqs[0].extra["stereo_baseline_m"]

@@ -142,7 +142,8 @@ def train_epochs(depth_cfg: Mapping, mode: str) -> int:
 def train_settings(depth_cfg: Mapping, dataset: str, mode: str) -> tuple[dict, dict]:
     """(model settings, training settings) of one model: ``depth.model`` / ``depth.train`` overridden by the
     system's ``depth.systems.<system>``, then by the mode's ``input_scale`` / ``steps`` / ``lr`` / ``decay_at`` and
-    then by the model entry's ``steps``; ``automask_after`` is the mode's (default 0). The model settings name the
+    then by the model entry's ``steps``; ``automask_after`` is the mode's, else the system's ``automask_at`` (a
+    fraction) of those steps (default 0). The model settings name the
     ``system``; the training settings hold ``epochs`` (validation passes, the best one kept; 0 = none:
     ``train_epochs``)."""
     system = system_of(depth_cfg, mode)
@@ -162,7 +163,8 @@ def train_settings(depth_cfg: Mapping, dataset: str, mode: str) -> tuple[dict, d
         train["lr"] = float(mode_cfg["lr"])
     if "decay_at" in mode_cfg:
         train["decay_at"] = float(mode_cfg["decay_at"])
-    train["automask_after"] = int(mode_cfg.get("automask_after", 0))
+    train["automask_after"] = int(mode_cfg["automask_after"] if "automask_after" in mode_cfg
+                                  else round(float(sset.get("automask_at", 0.0)) * int(train["steps"])))
     return model, train
 
 

@@ -141,13 +141,15 @@ class FeatDepthLoss:
     """The Feature Depth criterion ``(models, batch, step) -> loss dict`` for ``training.train``.
 
     ``dis_weight`` / ``cvt_weight``: the thesis' alpha / beta (eq. 3.20; ``alpha`` of ``loss_kwargs`` is the
-    SSIM weight of the photometric error). ``loss_kwargs`` go to ``losses.self_supervised_loss``; temporal sources only (the feature-metric term warps
+    SSIM weight of the photometric error). ``loss_kwargs`` go to ``losses.self_supervised_loss``, with auto-masking
+    off up to step ``automask_after`` (as the M mode's); temporal sources only (the feature-metric term warps
     the FeatureNet features of every source)."""
 
     def __init__(self, *, min_depth: float = 0.1, max_depth: float = 100.0, dis_weight: float = 1e-3,
-                 cvt_weight: float = 1e-3, feature_weight: float = 1.0, **loss_kwargs):
+                 cvt_weight: float = 1e-3, feature_weight: float = 1.0, automask_after: int = 0, **loss_kwargs):
         self.min_depth, self.max_depth = float(min_depth), float(max_depth)
         self.dis_weight, self.cvt_weight, self.feature_weight = float(dis_weight), float(cvt_weight), float(feature_weight)
+        self.automask_after = int(automask_after)
         self.loss_kwargs = loss_kwargs
 
     def __call__(self, models: Mapping[str, nn.Module], batch: Mapping, step: int = 1) -> dict[str, torch.Tensor]:
@@ -156,7 +158,8 @@ class FeatDepthLoss:
         disps = pipeline.predict_disparities(models, target)
         transforms = pipeline.source_transforms(models, batch)
         photo = pipeline.loss_from_outputs(batch, disps, transforms, min_depth=self.min_depth,
-                                           max_depth=self.max_depth, **self.loss_kwargs)
+                                           max_depth=self.max_depth,
+                                           **losses.masking_at(self.loss_kwargs, step, self.automask_after))
         names = list(batch["sources"])
         with torch.no_grad():
             phi = features(models, torch.cat([target] + [batch["sources"][n] for n in names]))

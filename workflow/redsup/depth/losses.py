@@ -5,7 +5,7 @@ Shapes: images (B, C, H, W); error maps (B, 1, H, W); stacks of error maps over 
 """
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import torch
 import torch.nn.functional as F
@@ -74,6 +74,13 @@ def automask(reproj_errors: torch.Tensor | Sequence[torch.Tensor],
         noise = torch.randn(identity.shape, generator=generator, device=identity.device, dtype=identity.dtype)
         identity = identity + noise_std * noise
     return reproj < identity.min(dim=1, keepdim=True).values
+
+
+def masking_at(loss_kwargs: Mapping, step: int, automask_after: int) -> dict:
+    """The loss settings of training step ``step`` (from 1) when auto-masking starts after step ``automask_after``:
+    ``loss_kwargs`` from step ``automask_after + 1`` on, before that the same with ``automasking`` off (every pixel
+    in the loss, as while a from-scratch network cannot yet tell a moving pixel from a static one)."""
+    return dict(loss_kwargs) if step > automask_after else {**loss_kwargs, "automasking": False}
 
 
 def edge_aware_smoothness(disp: torch.Tensor, image: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:

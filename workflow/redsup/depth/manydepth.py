@@ -37,7 +37,7 @@ import torch
 import torch.nn.functional as F
 from torch import nn
 
-from redsup.depth import networks, pipeline, warping
+from redsup.depth import losses, networks, pipeline, warping
 
 TEACHER = {"depth_encoder": "teacher_encoder", "depth_decoder": "teacher_decoder"}
 FROZEN = ("teacher_encoder", "teacher_decoder", "pose_encoder", "pose_decoder")  # after ManydepthLoss.freeze_at
@@ -238,17 +238,20 @@ def _up(x: torch.Tensor, size, mode: str = "bilinear") -> torch.Tensor:
 class ManydepthLoss:
     """The Manydepth criterion ``(models, batch, step) -> loss dict`` for ``training.train``.
 
-    ``loss_kwargs`` go to ``losses.self_supervised_loss`` (smoothness, SSIM weight, auto-masking, noise);
-    ``generator`` draws the augmentation (reproducible). The batch needs the temporal source ``prev``."""
+    ``loss_kwargs`` go to ``losses.self_supervised_loss`` (smoothness, SSIM weight, auto-masking, noise), with
+    auto-masking off for the teacher's and the multi-frame loss up to step ``automask_after`` (every pixel in the
+    loss before, as the M mode's ``automask_after``); ``generator`` draws the augmentation (reproducible). The
+    batch needs the temporal source ``prev``."""
 
     def __init__(self, *, min_depth: float = 0.1, max_depth: float = 100.0, static_prob: float = 0.25,
                  zero_prob: float = 0.25, consistency_weight: float = 1.0, freeze_at: int | None = None,
-                 generator: torch.Generator | None = None, **loss_kwargs):
+                 generator: torch.Generator | None = None, automask_after: int = 0, **loss_kwargs):
         self.min_depth, self.max_depth = float(min_depth), float(max_depth)
         self.static_prob, self.zero_prob = float(static_prob), float(zero_prob)
         self.consistency_weight = float(consistency_weight)
         self.freeze_at = freeze_at
         self.generator = generator
+        self.automask_after = int(automask_after)
         self.loss_kwargs = loss_kwargs
 
     def frozen(self, step: int) -> bool:
@@ -263,7 +266,8 @@ class ManydepthLoss:
 
     def __call__(self, models: Mapping[str, nn.Module], batch: Mapping, step: int = 1) -> dict[str, torch.Tensor]:
         frozen = self.frozen(step)
-        kw = dict(min_depth=self.min_depth, max_depth=self.max_depth, **self.loss_kwargs)
+        kw = dict(min_depth=self.min_depth, max_depth=self.max_depth,
+                  **losses.masking_at(self.loss_kwargs, step, self.automask_after))
         target, size = batch["target"], tuple(batch["target"].shape[-2:])
         teacher = teacher_view(models)
         if frozen:

@@ -36,9 +36,10 @@ def build(meta: Mapping) -> nn.ModuleDict:
     raise ValueError(f"unknown depth system {system!r} (known: {SYSTEMS})")
 
 
-def criterion(meta: Mapping, loss_kwargs: Mapping, steps: int, seed: int):
-    """The training criterion ``(models, batch, step) -> loss dict`` of ``meta["system"]``; None = Monodepth2's
-    (``pipeline.batch_loss`` through ``training.train``'s default)."""
+def criterion(meta: Mapping, loss_kwargs: Mapping, steps: int, seed: int, automask_after: int = 0):
+    """The training criterion ``(models, batch, step) -> loss dict`` of ``meta["system"]``, auto-masking only after
+    step ``automask_after``; None = Monodepth2's (``pipeline.batch_loss`` through ``training.train``'s default,
+    which takes ``automask_after`` itself)."""
     system = meta.get("system", "monodepth2")
     kw = dict(loss_kwargs)
     if system == "monodepth2":
@@ -48,10 +49,12 @@ def criterion(meta: Mapping, loss_kwargs: Mapping, steps: int, seed: int):
         return manydepth.ManydepthLoss(static_prob=float(meta["static_prob"]), zero_prob=float(meta["zero_prob"]),
                                        consistency_weight=float(meta["consistency_weight"]),
                                        freeze_at=None if freeze is None else int(round(float(freeze) * steps)),
-                                       generator=torch.Generator().manual_seed(int(seed) + 1), **kw)
+                                       generator=torch.Generator().manual_seed(int(seed) + 1),
+                                       automask_after=int(automask_after), **kw)
     if system == "featdepth":
         return featdepth.FeatDepthLoss(dis_weight=float(meta["alpha"]), cvt_weight=float(meta["beta"]),
-                                       feature_weight=float(meta["feature_weight"]), **kw)
+                                       feature_weight=float(meta["feature_weight"]),
+                                       automask_after=int(automask_after), **kw)
     raise ValueError(f"unknown depth system {system!r} (known: {SYSTEMS})")
 
 

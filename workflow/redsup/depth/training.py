@@ -14,7 +14,7 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
-from redsup.depth import data, pipeline
+from redsup.depth import data, losses, pipeline
 from redsup.optim import Adam
 
 
@@ -43,14 +43,15 @@ def train(models: Mapping[str, nn.Module], seqs: Seq[data.Sequence], sources: Se
     ``criterion(models, batch, step)`` -> loss dict (``loss`` minimised) is the system's training loss (default:
     Monodepth2's ``pipeline.batch_loss`` with ``loss_kwargs``). ``decay_at``: one fraction of the steps or a list
     (lr x gamma at each). ``automask_after``: with the default criterion, auto-masking (``loss_kwargs``) only from
-    step ``automask_after + 1`` on; every pixel is in the loss before (other criteria: must be 0). ``validate(step)`` -> metrics on the validation split, called every ``validate_every``
+    step ``automask_after + 1`` on; every pixel is in the loss before (``losses.masking_at``; a system's criterion
+    takes its own ``automask_after``, so here it must be 0). ``validate(step)`` -> metrics on the validation split, called every ``validate_every``
     steps and after the last (an "epoch"); the weights of the pass with the lowest ``select`` are restored at the
     end (best-epoch selection on validation) and the summary holds every pass (``validation``: step, the
     metrics, the mean of each loss term over the epoch) and ``best_step``."""
     loss_kwargs = dict(loss_kwargs or {})
     if automask_after and criterion is not None:
-        raise ValueError("automask_after applies to the Monodepth2 loss only, not to a system's own criterion")
-    unmasked = {**loss_kwargs, "automasking": False}
+        raise ValueError("automask_after here applies to the Monodepth2 loss only: a system's criterion takes its own "
+                         "(systems.criterion)")
     samples, dropped = data.training_samples(seqs, sources, min_speed)
     static_fallback = False
     if not samples and dropped["static"] > 0:  # every complete sample is static: train on them, say so
@@ -84,7 +85,7 @@ def train(models: Mapping[str, nn.Module], seqs: Seq[data.Sequence], sources: Se
         batch = _to(data.make_batch(seqs, items, sources, flips), device)
         if criterion is None:
             terms = pipeline.train_step(models, optimizer, batch, generator=generator if device == "cpu" else None,
-                                        **(loss_kwargs if step > automask_after else unmasked))
+                                        **losses.masking_at(loss_kwargs, step, automask_after))
         else:
             terms = criterion_step(criterion, models, optimizer, batch, step)
         if not np.isfinite(terms["loss"]):
