@@ -266,3 +266,16 @@ def test_progression_figure_reads_the_json_sidecar_without_torch(tmp_path):
               "print('torch' in sys.modules)")
     out = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "False" and (tmp_path / "p.png").stat().st_size > 1000
+
+
+def test_the_caption_names_where_a_system_departs_from_the_thesis():
+    """The Galteland captions' recipe line states Feature Depth's feature-metric weight against eq. 3.22's 1 and the
+    auto-masking schedule, and says nothing of either for a system that keeps the defaults."""
+    from redsup.depth.plan import _system_recipe
+    cfg = {"depth": {"model": {"base_channels": 16}, "train": {"steps": 600, "batch_size": 4},
+                     "systems": {"featdepth": {"feature_weight": 1e-3, "automask_at": 0.333, "steps": 300},
+                                 "manydepth": {"n_bins": 32, "automask_at": 0.0}}}}
+    fd, md = _system_recipe(cfg, "featdepth"), _system_recipe(cfg, "manydepth")
+    assert "feature-metric loss x 0.001 (the thesis' eq. 3.22: x 1)" in fd
+    assert "auto-masking after the first 33% of the steps" in fd and "300 steps of batch 4" in fd
+    assert "auto-masking" not in md and "feature-metric" not in md and "32 cost-volume bins" in md

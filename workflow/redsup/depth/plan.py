@@ -286,6 +286,10 @@ def _system_recipe(config: Mapping, system: str) -> str:
     steps, batch = s.get("steps", d["train"]["steps"]), s.get("batch_size", d["train"]["batch_size"])
     epochs = int(s.get("epochs", 0))
     extra = f", {s['n_bins']} cost-volume bins" if "n_bins" in s else ""
+    if "feature_weight" in s:
+        extra += f", feature-metric loss x {s['feature_weight']:g} (the thesis' eq. 3.22: x 1)"
+    if float(s.get("automask_at", 0.0)) > 0:
+        extra += f", auto-masking after the first {float(s['automask_at']):.0%} of the steps (every pixel in the loss before)"
     val = (f", {epochs} validation passes on the val split, the weights of the pass with the lowest val Abs Rel "
            "kept (never chosen on test)") if epochs else ""
     return (f"{SYSTEM_NAMES.get(system, system)}: ResNet-18 width {width}, input {s.get('input_scale', 1.0):g} x the "
