@@ -260,6 +260,12 @@ def test_seed_rows_are_averaged_with_their_spread(cfg):
     rec = frame.noise["Front+Back"]["Abs Rel"]
     assert rec["kind"] == "seeds" and rec["values"] == pytest.approx([0.52, 0.42, 0.62])
     assert "3 seeds" in frame.note
+    # the seed mean's test-sampling noise: every seed resamples the same 5 frames the same way, so replicate r of
+    # each row is its seed mean's frame offsets resampled, and the two rows differ by 0.52 - 0.24 in every replicate
+    other = frame.noise["Front only"]["Abs Rel"]
+    assert rec["units"] == other["units"] and len(rec["boot"]) == len(other["boot"]) == 200
+    assert np.asarray(rec["boot"]) - np.asarray(other["boot"]) == pytest.approx(np.full(200, 0.28))
+    assert min(other["boot"]) >= 0.22 - 1e-9 and max(other["boot"]) <= 0.26 + 1e-9  # 0.22 + 0.01 x (0 .. 4)
     # the seed model ids and their checkpoints
     assert configs.seed_models("world_lyft/M", 3) == ["world_lyft/M", "world_lyft/M/seed1", "world_lyft/M/seed2"]
     assert configs.parse_model("world_lyft/M_frontback/seed2") == ("world_lyft", "M_frontback", 2)

@@ -323,3 +323,49 @@ def test_vectorised_matches_loop_transliteration(seed):
                 assert res[f"{key}_R40"] == pytest.approx(r40, abs=1e-9), key
                 checked += r40 > 0
     assert checked >= 12        # the random scene is not degenerate
+
+
+# ------------------------------------------------------------------------------------ resampled AP (bootstrap)
+def test_resampled_ap_is_evaluate_on_the_resampled_frames():
+    """Every resample's AP equals `evaluate` on the explicitly repeated frame list (overlaps computed once); the
+    41 exactly detected frames alone score 100, the 41 frames whose car is missed alone 0."""
+    frames = _perfect(41) + [([{"box": _car(15.0)}], [{"box": _car(40.0), "score": 0.3}]) for _ in range(41)]
+    frames += [([{"box": _car(12.0)}, {"cls": "DontCare", "bbox": [0, 0, 60, 60]}],
+                [{"box": _car(12.2), "score": 0.6}, {"box": _car(30.0), "score": 0.7, "bbox": [0, 0, 50, 50]}])]
+    gts, dets = _scene(frames)
+    rng = np.random.default_rng(0)
+    index_sets = [np.arange(41), np.arange(41, 82), *rng.integers(0, len(gts), (3, len(gts)))]
+    for metric, iou in (("bev", 0.7), ("3d", 0.5)):
+        got = K.resampled_ap(gts, dets, index_sets, metric, iou)
+        assert got[f"Car_{metric}_{iou:g}/easy_R40"][0] == 100.0 and got[f"Car_{metric}_{iou:g}/easy_R40"][1] == 0.0
+        for b, idx in enumerate(index_sets):
+            ref = K.evaluate([gts[i] for i in idx], [dets[i] for i in idx], metrics=(metric,),
+                             iou_thresholds={"Car": (iou,)})
+            for key, values in got.items():
+                assert values[b] == pytest.approx(ref[key], abs=1e-9), (b, key)
+    moderate = K.resampled_ap(gts, dets, index_sets, "bev", 0.7, difficulties=("moderate",))
+    assert sorted(moderate) == ["Car_bev_0.7/moderate_R11", "Car_bev_0.7/moderate_R40"]
+    assert moderate["Car_bev_0.7/moderate_R40"] == pytest.approx(K.resampled_ap(gts, dets, index_sets, "bev", 0.7)
+                                                                 ["Car_bev_0.7/moderate_R40"])
+    with pytest.raises(ValueError, match="unknown difficulties"):
+        K.resampled_ap(gts, dets, index_sets, "bev", 0.7, difficulties=("medium",))
+
+
+def test_bootstrap_ap_resamples_by_frame_ids():
+    """The resamples are a function of the frame ids only: two detectors on the same frames draw the same
+    resamples (their replicates pair), and listing the frames in another order changes nothing."""
+    frames = _perfect(30) + [([{"box": _car(15.0)}], []) for _ in range(20)]
+    gts, dets = _scene(frames)
+    worse = [K.FrameDet(d.boxes[:0], d.bbox[:0], d.score[:0]) if i % 3 == 0 else d for i, d in enumerate(dets)]
+    ids = [f"s/{i}" for i in range(len(gts))]
+    a = K.bootstrap_ap(gts, dets, ids, (("bev", 0.7),), 20)
+    b = K.bootstrap_ap(gts, worse, ids, (("bev", 0.7),), 20)
+    key = "Car_bev_0.7/moderate_R40"
+    assert a["units"] == b["units"] and a["n_units"] == 50 and len(a["values"][key]) == 20
+    assert all(x >= y for x, y in zip(a["values"][key], b["values"][key]))   # fewer detections, same resample
+    order = np.random.default_rng(1).permutation(len(gts))
+    c = K.bootstrap_ap([gts[i] for i in order], [dets[i] for i in order], [ids[i] for i in order],
+                       (("bev", 0.7),), 20)
+    assert c["values"][key] == pytest.approx(a["values"][key]) and c["units"] == a["units"]
+    with pytest.raises(ValueError, match="one distinct id a frame"):
+        K.bootstrap_ap(gts, dets, ids[:-1] + ids[:1], (("bev", 0.7),), 5)

@@ -427,6 +427,13 @@ def test_tables_from_hand_made_metrics(tmp_path):
     # by hand: the mean of the two seeds (51 + 1 on R11, 46 + 10 at IoU 0.5), the record keeps both values
     assert t1.loc["ours†", "AP_BEV Moderate R11"] == 52 and t1.loc["ours†", "AP_BEV@0.5 Hard"] == 56
     assert noise["ours†"]["AP_BEV Moderate"] == {"kind": "seeds", "values": [50.0, 52.0]}
+    # with each seed's bootstrap replicates over the test frames the record carries their replicate-wise mean
+    key = "Car_bev_0.7/moderate_R40"
+    seeds_b = [_metrics(60, 50, 45) | {"bootstrap": {"units": "u", "n_units": 90, "values": {key: [49.0, 51.0, 47.0]}}},
+               _metrics(62, 52, 47) | {"bootstrap": {"units": "u", "n_units": 90, "values": {key: [53.0, 52.0, 50.0]}}}]
+    _, noise_b = build_table("Moderate", {"ours†": seeds_b})
+    assert noise_b["ours†"]["AP_BEV Moderate"]["boot"] == [51.0, 51.5, 48.5]
+    assert "boot" not in noise_b["ours†"]["AP_BEV Easy"]                       # no replicates for that key
     assert math.isnan(t1.loc[ch6, "AP_BEV@0.5 Easy"])
     out = {k: tmp_path / f"t1.{k}" for k in ("md", "csv", "tex")}
     note = caption_note("default", _metrics(0, 0, 0), "R40", 3, 2)

@@ -362,6 +362,16 @@ def test_tables_from_metrics_average_the_seeds():
     assert noise["(b) y"]["AP_3D Easy"]["values"] == [21.0, 21.0]
     with pytest.raises(KeyError, match="r3"):
         seed_table([("(c)", "r3/seed0", None)], {"r1/seed0": m})
+    # runs that stored bootstrap replicates of their AP over the same test frames: the seed mean's replicates
+    # are the seeds' replicate-wise means (12 / 13 and 16 / 18 -> 14 / 15.5), the diagnostic columns keep seeds only
+    key = "Car_bev_0.5/moderate_R40"
+    boot = {"r1/seed0": {"units": "f", "n_units": 9, "values": {key: [12.0, 13.0]}},
+            "r1/seed1": {"units": "f", "n_units": 9, "values": {key: [16.0, 18.0]}}}
+    booted = {r: dict(v, bootstrap=boot[r]) if r in boot else v for r, v in results.items()}
+    _, noise2 = seed_table(rows, booted)
+    rec = noise2["(a) x"]["AP_BEV Moderate"]
+    assert rec["values"] == [12.0, 16.0] and rec["boot"] == [14.0, 15.5] and rec["units"] == "f"
+    assert "boot" not in noise2["(a) x"]["AP_3D Moderate"] and "boot" not in noise2["(b) y"]["AP_BEV Moderate"]
     assert "fewer than 41 in easy" in gt_count_note({"r": {"n_gt/easy": 9, "n_gt/moderate": 50, "n_gt/hard": 90}})
 
 

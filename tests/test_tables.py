@@ -437,3 +437,63 @@ def test_seed_records_of_the_same_models_pair_seed_by_seed():
     # a different number of seeds cannot pair
     _, _, how3 = tables.noise.difference_interval(ma, mb, na, tables.noise.seeds(b[:2], "world_kitti/MS"))
     assert how3 == "seeds (unpaired)"
+
+
+def _boot(values, units="u10", n_units=10):
+    return {"kind": "bootstrap", "values": list(values), "units": units, "n_units": n_units}
+
+
+def test_seed_means_carry_their_test_sampling_noise():
+    """Three seeds evaluated on the same test units: the seed spread says nothing about which units those are.
+    By hand, B = 4 replicates. (1) Every seed lowers the error by exactly 0.03 (seed variance 0), but the seed
+    means' replicates differ by 0 / 0.1 / 0.2 / 0.3 (variance 0.0166667): seeds alone give the point -0.03
+    (reproduces), with the sampling noise -0.03 -+ 1.96 x 0.129099 = 0.253034 (inconclusive). (2) Per-seed
+    differences -0.02 / -0.01 / -0.03 (variance of the mean 1e-4 / 3, df 2) and replicate differences
+    -0.005 / 0.005 / -0.005 / 0.005 (variance 1e-4 / 3): Welch-Satterthwaite over both, total 6.6667e-5 at df
+    (2v)^2 / (v^2 / 2) = 8, t 2.306, would give 0.018828, narrower than the seeds' own 4.303 x 0.0057735 = 0.024845:
+    the half width is the larger, so the interval stays the seeds' [-0.044845, 0.004845]. (3) Per-seed differences
+    -0.020 / -0.021 / -0.019 (variance of the mean 3.3333e-7) and replicate differences -0.01 / 0.01 / -0.01 / 0.01
+    (1.3333e-4): total 1.33667e-4, df 321600 -> 1.96, half width 1.96 x 0.0115614 = 0.022660, against the seeds'
+    4.303 x 5.7735e-4 = 0.002484 alone: the sampling noise decides (inconclusive instead of reproduces)."""
+    noise = tables.noise
+    a1, b1 = [0.10, 0.12, 0.14], [0.13, 0.15, 0.17]
+    ra = noise.with_sampling(noise.seeds(a1, "m"), [_boot([0.1, 0.2, 0.3, 0.4])] * 3)
+    rb = noise.with_sampling(noise.seeds(b1, "m"), [_boot([0.1, 0.1, 0.1, 0.1])] * 3)
+    assert ra["boot"] == pytest.approx([0.1, 0.2, 0.3, 0.4]) and ra["units"] == "u10" and ra["values"] == a1
+    lo0, hi0, how0 = noise.difference_interval(0.12, 0.15, noise.seeds(a1, "m"), noise.seeds(b1, "m"))
+    assert how0 == "paired seeds" and lo0 == pytest.approx(-0.03) and hi0 == pytest.approx(-0.03)
+    lo, hi, how = noise.difference_interval(0.12, 0.15, ra, rb)
+    assert how == "paired seeds + paired test bootstrap"
+    assert lo == pytest.approx(-0.03 - 0.253034, abs=1e-6) and hi == pytest.approx(-0.03 + 0.253034, abs=1e-6)
+    assert noise.verdict_of_interval(-hi, -lo) == "inconclusive"
+    a2, b2 = [0.10, 0.12, 0.14], [0.12, 0.13, 0.17]
+    ra2 = noise.with_sampling(noise.seeds(a2, "m"), [_boot([0.0, 0.01, 0.0, 0.01])] * 3)
+    rb2 = noise.with_sampling(noise.seeds(b2, "m"), [_boot([0.005, 0.005, 0.005, 0.005])] * 3)
+    lo2, hi2, _ = noise.difference_interval(0.12, 0.14, ra2, rb2)
+    assert lo2 == pytest.approx(-0.044845, abs=2e-6) and hi2 == pytest.approx(0.004845, abs=2e-6)
+    lo2s, hi2s, _ = noise.difference_interval(0.12, 0.14, noise.seeds(a2, "m"), noise.seeds(b2, "m"))
+    assert (lo2s, hi2s) == pytest.approx((lo2, hi2))
+    a5, b5 = [0.100, 0.120, 0.140], [0.120, 0.141, 0.159]
+    ra5 = noise.with_sampling(noise.seeds(a5, "m"), [_boot([0.0, 0.02, 0.0, 0.02])] * 3)
+    rb5 = noise.with_sampling(noise.seeds(b5, "m"), [_boot([0.01] * 4)] * 3)
+    lo5, hi5, _ = noise.difference_interval(0.12, 0.14, ra5, rb5)
+    assert lo5 == pytest.approx(-0.02 - 0.022660, abs=2e-6) and hi5 == pytest.approx(-0.02 + 0.022660, abs=2e-6)
+    lo5s, hi5s, _ = noise.difference_interval(0.12, 0.14, noise.seeds(a5, "m"), noise.seeds(b5, "m"))
+    assert hi5s == pytest.approx(-0.02 + 0.002484, abs=2e-6)
+    assert noise.verdict_of_interval(-hi5s, -lo5s) == "reproduces" and noise.verdict_of_interval(-hi5, -lo5) == \
+        "inconclusive"
+    # replicates over other units do not pair: their variances add
+    rb3 = noise.with_sampling(noise.seeds(b2, "m"), [_boot([0.005, 0.015, 0.005, 0.015], units="other")] * 3)
+    _, _, how3 = noise.difference_interval(0.12, 0.14, ra2, rb3)
+    assert how3 == "paired seeds + test bootstrap (unpaired)"
+    # the seeds' replicates must share their units (else the record keeps its seeds only)
+    mixed = noise.with_sampling(noise.seeds(a2), [_boot([0, 1, 0, 1]), _boot([0, 1, 0, 1], units="v"),
+                                                  _boot([0, 1, 0, 1])])
+    assert "boot" not in mixed
+    # a one-seed row's bootstrap record against a seed mean with replicates on the same units pairs its replicates
+    lo4, hi4, how4 = noise.difference_interval(0.12, 0.14, ra2, _boot([0.005, 0.005, 0.005, 0.005]))
+    assert how4 == "seeds + paired test bootstrap"
+    # by hand: seeds 0.10 / 0.12 / 0.14, variance of the mean 4e-4 / 3 (df 2); replicate differences -0.005 / 0.005
+    # / -0.005 / 0.005 (variance 3.3333e-5); total 1.6667e-4 at df 3.125 (t 3.182): 0.041079, below the seeds' own
+    # 4.303 x 0.0115470 = 0.049687, which is the half width
+    assert lo4 == pytest.approx(-0.02 - 0.049687, abs=2e-6) and hi4 == pytest.approx(-0.02 + 0.049687, abs=2e-6)

@@ -353,7 +353,11 @@ def test_seed_runs_and_seed_rows(tmp_path):
                "mlp_tracker_seed1": record(2.0, [2] * 4), "mlp_tracker_seed2": record(3.0, [3] * 4)}
     ours, noise = report.configuration_table("errors", rows, results)
     assert ours.at["Ours (MLP-tracker)", "E_v"] == pytest.approx(2.0)
-    assert noise["Ours (MLP-tracker)"]["E_v"] == {"kind": "seeds", "values": [1.0, 2.0, 3.0]}
+    rec = noise["Ours (MLP-tracker)"]["E_v"]
+    assert rec["kind"] == "seeds" and rec["values"] == [1.0, 2.0, 3.0]
+    # its test-sampling noise: each seed's squared errors are constant (1, 2, 3), so every replicate of the seed
+    # mean is 2, over the same 4 vehicles as the geometric row's bootstrap
+    assert rec["boot"] == pytest.approx([2.0] * 200) and rec["units"] == noise["geometric reprojection"]["E_v"]["units"]
     geo = noise["geometric reprojection"]["E_v^far"]
     assert geo["kind"] == "bootstrap" and set(np.round(geo["values"], 6)) <= {7.0, 8.0, 9.0}
     # E_v of the full sample by hand: bins near 1, medium 3, far (7 + 9) / 2 = 8 -> mean 4

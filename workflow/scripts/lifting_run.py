@@ -30,10 +30,10 @@ labels = sm.input.labels if "labels" in sm.input.keys() else None
 with child_run(sm.log.run, tables[0], run_name, rule=sm.rule, wildcards=dict(sm.wildcards), config=sm.config,
                params={"run": spec, "tables": tables, "seed": seed, "train": cfg["train"], "loss": cfg["loss"],
                        "network": cfg["network"], "max_points": cfg["max_points"]}) as run:
-    model, metrics, info = run_configuration(spec, cfg, train, test, seed=seed, labels_path=labels,
-                                             log=run.log_metric, camera=sm.config["detection"]["camera"],
-                                             min_depth=sm.config["detection"]["points"]["min_depth"],
-                                             template=load_template(sm.input.template, spec_from_config(cfg)))
+    model, metrics, info, boot = run_configuration(spec, cfg, train, test, seed=seed, labels_path=labels,
+                                                   log=run.log_metric, camera=sm.config["detection"]["camera"],
+                                                   min_depth=sm.config["detection"]["points"]["min_depth"],
+                                                   template=load_template(sm.input.template, spec_from_config(cfg)))
     run.log_metrics(metrics)
     run.log_metrics(info)
     save_model(model, spec, sm.config, sm.output.model, {"configuration": conf, "seed": seed})
@@ -41,5 +41,7 @@ with child_run(sm.log.run, tables[0], run_name, rule=sm.rule, wildcards=dict(sm.
     write_text_atomic(sm.output.info, json.dumps(info, indent=1, sort_keys=True) + "\n")
     # the result the tables read: the KITTI metrics and the evaluation diagnostics
     result = metrics | {k: v for k, v in info.items() if k.startswith("diag/")}
+    if boot:   # bootstrap replicates of the AP over the test frames (the tables' test-sampling noise)
+        result["bootstrap"] = boot
     write_text_atomic(sm.output.metrics, json.dumps(result, indent=1, sort_keys=True) + "\n")
     print(json.dumps({k: v for k, v in metrics.items() if "_0.5/" in k and k.endswith("R40")}, indent=1))

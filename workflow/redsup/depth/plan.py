@@ -270,9 +270,13 @@ def table_frame(table_id: str, config: Mapping, rows: Sequence[tuple], results: 
         values = {c: [f[0].at[label, c] for f in frames if label in f[0].index] for c in ours.columns}
         for c, vals in values.items():
             ours.at[label, c] = float(np.mean(vals))
-        # rows read from the same trained models (the label's base model, seed by seed) pair up
+        # rows read from the same trained models (the label's base model, seed by seed) pair up; each seed's
+        # paired bootstrap over its frames gives the test-sampling noise of the seed mean
         pair = by_label[label].spec.model
-        noise[label] = {col: noise_lib.seeds(values[col], pair) for col in METRIC_COLUMNS.values() if col in values}
+        noise[label] = {col: noise_lib.with_sampling(noise_lib.seeds(values[col], pair),
+                                                     [f[1].get(label, {}).get(col) for f in frames
+                                                      if label in f[0].index])
+                        for col in METRIC_COLUMNS.values() if col in values}
     return TableFrame(ours, noise, table_note(config, tcfg, infos[0], max(seen.values()), models, timing))
 
 

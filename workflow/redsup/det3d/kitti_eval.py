@@ -279,6 +279,66 @@ def evaluate(gts: list[FrameGT], dets: list[FrameDet], classes: tuple[str, ...] 
     return results
 
 
+def resampled_ap(gts: list[FrameGT], dets: list[FrameDet], index_sets, metric: str = "bev",
+                 iou: float = 0.7, cls: str = "Car", difficulties: tuple[str, ...] = DIFFICULTIES
+                 ) -> dict[str, np.ndarray]:
+    """AP (percent) of ``cls`` at ``iou`` on each resample of the frames: ``index_sets`` (B of them) are indices into
+    ``gts`` / ``dets`` (a frame drawn twice counts twice), e.g. a bootstrap's. Returns ``evaluate``'s keys for
+    each of ``difficulties``, R11 and R40, each a (B,) array; the identity resample gives ``evaluate``'s numbers. The
+    overlaps are computed once and every resample selects its frames' rows, so a replicate costs only the two
+    matching passes."""
+    _check(gts, dets)
+    if metric not in METRICS:
+        raise ValueError(f"unknown metric {metric!r}; expected one of {METRICS}")
+    st = _stack(gts, dets)
+    ov = _overlaps(st, metric)
+    dontcare = st.gt_cls == "dontcare"
+    dc_ov = _overlaps(st, metric, gt_rows=dontcare, criterion=0).max(axis=2) if dontcare.any() \
+        else np.zeros(st.det_score.shape)
+    out: dict[str, np.ndarray] = {}
+    unknown = set(difficulties) - set(DIFFICULTIES)
+    if unknown:
+        raise ValueError(f"unknown difficulties {sorted(unknown)}; expected some of {DIFFICULTIES}")
+    for difficulty, name in enumerate(DIFFICULTIES):
+        if name not in difficulties:
+            continue
+        prep = _prepare(st, cls, difficulty)
+        r11, r40 = [], []
+        for idx in (np.asarray(i, dtype=np.int64) for i in index_sets):
+            sub = _Prepared(prep.ign_gt[idx], prep.ign_det[idx], prep.score[idx], int((prep.ign_gt[idx] == 0).sum()))
+            if sub.n_gt == 0:
+                a11 = a40 = float("nan")
+            else:
+                t = thresholds(_first_pass(ov[idx], sub, iou), sub.n_gt)
+                tp, fp, _ = _second_pass(ov[idx], dc_ov[idx], sub, iou, t)
+                a11, a40 = _ap_from_counts(tp, fp)
+            r11.append(a11)
+            r40.append(a40)
+        key = f"{cls}_{metric}_{iou:g}/{name}"
+        out[f"{key}_R11"], out[f"{key}_R40"] = np.asarray(r11), np.asarray(r40)
+    return out
+
+
+def bootstrap_ap(gts: list[FrameGT], dets: list[FrameDet], unit_ids: list[str],
+                 specs: tuple[tuple[str, float], ...], n: int, difficulties: tuple[str, ...] = DIFFICULTIES) -> dict:
+    """The test-sampling noise of a split's AP: ``resampled_ap`` on ``n`` bootstrap resamples of its frames
+    (``unit_ids``, one per frame, name them; the resamples are those of ``redsup.tables.noise.resample_indices``,
+    a function of the ids only, so every run on the same frames draws the same ones and rows pair up) for each
+    (metric, IoU) of ``specs`` and each of ``difficulties`` (a resample costs two matching passes for each). Returns {"units": digest, "n_units": F, "values": {key: [n floats]}}."""
+    from redsup.tables.noise import resample_indices, units_digest
+
+    if len(unit_ids) != len(gts) or len(set(unit_ids)) != len(unit_ids):
+        raise ValueError(f"bootstrap_ap: {len(unit_ids)} unit ids for {len(gts)} frames (one distinct id a frame)")
+    idx, sorted_ids = resample_indices(unit_ids, n)
+    position = {u: k for k, u in enumerate(str(x) for x in unit_ids)}
+    frames = np.array([position[u] for u in sorted_ids])[idx]
+    values: dict[str, list[float]] = {}
+    for metric, iou in specs:
+        values |= {k: [float(x) for x in v]
+                   for k, v in resampled_ap(gts, dets, frames, metric, iou, difficulties=difficulties).items()}
+    return {"units": units_digest(unit_ids), "n_units": len(unit_ids), "values": values}
+
+
 # ------------------------------------------------------------------------------------------------ command
 CLI_THRESHOLDS = {"Car": 0.7, "Van": 0.7, "Pedestrian": 0.5, "Cyclist": 0.5, "Person_sitting": 0.5}
 CLI_HELP = """KITTI object AP of a detection folder against a ground-truth folder, printed as one JSON object.

@@ -55,17 +55,37 @@ def valid_gt_counts(gts: list[FrameGT], cls: str = "car") -> dict[str, int]:
     return out
 
 
-def evaluate_split(model: CenterDetector, data: SplitData, grid: GridSpec, spec: InferSpec, template_size,
-                   device: str = "cpu", iou_thresholds: tuple[float, ...] = (0.7, 0.5),
-                   kitti_pixels: bool = True) -> tuple[dict, list[FrameDet]]:
-    """(metrics, detections in the world camera's pixels) of `model` on every frame of `data`."""
-    dets, seconds = predict(model, data, grid, spec, template_size, device)
+def eval_frames(data: SplitData, dets: list[FrameDet], kitti_pixels: bool = True) -> tuple[list[FrameGT], list[FrameDet]]:
+    """(ground truth, detections) of every frame in the evaluation frame (the devkit's rectified camera), 2D boxes
+    in KITTI-camera pixels when ``kitti_pixels``."""
     gts = [eval_frame.frames_to_eval([data.frame_gt(f)], data.eval_transform(f))[0] for f in range(data.n_frames)]
     eval_dets = [eval_frame.frames_to_eval([d], data.eval_transform(f))[0] for f, d in enumerate(dets)]
     if kitti_pixels:
         scales = [kitti_pixel_scale(data.camera(f)[0]) for f in range(data.n_frames)]
         gts = [scale_frames([g], s)[0] for g, s in zip(gts, scales)]
         eval_dets = [scale_frames([d], s)[0] for d, s in zip(eval_dets, scales)]
+    return gts, eval_dets
+
+
+def frame_ids(data: SplitData) -> list[str]:
+    """One id a test frame (scene index / frame index in the scene): the bootstrap's units."""
+    return [f"lidar_detector:{int(s)}/{int(i)}" for s, i in zip(data.arrays["frame_scene"], data.arrays["frame_index"])]
+
+
+def sampling_noise(data: SplitData, dets: list[FrameDet], n: int, iou: float = 0.7, kitti_pixels: bool = True) -> dict:
+    """``kitti_eval.bootstrap_ap`` of AP_BEV at ``iou`` over the frames of ``data`` ({} when ``n`` is 0)."""
+    if n <= 0:
+        return {}
+    gts, eval_dets = eval_frames(data, dets, kitti_pixels)
+    return kitti_eval.bootstrap_ap(gts, eval_dets, frame_ids(data), (("bev", iou),), n)
+
+
+def evaluate_split(model: CenterDetector, data: SplitData, grid: GridSpec, spec: InferSpec, template_size,
+                   device: str = "cpu", iou_thresholds: tuple[float, ...] = (0.7, 0.5),
+                   kitti_pixels: bool = True) -> tuple[dict, list[FrameDet]]:
+    """(metrics, detections in the world camera's pixels) of `model` on every frame of `data`."""
+    dets, seconds = predict(model, data, grid, spec, template_size, device)
+    gts, eval_dets = eval_frames(data, dets, kitti_pixels)
     metrics = kitti_eval.evaluate(gts, eval_dets, metrics=("bev", "3d"), iou_thresholds={"Car": tuple(iou_thresholds)})
     metrics.update({k: float(v) for k, v in valid_gt_counts(gts).items()})
     metrics["n_detections"] = float(sum(len(d.score) for d in dets))

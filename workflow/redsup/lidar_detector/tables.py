@@ -4,7 +4,8 @@ Rows are named as in the thesis (`paper_values.csv`); the configuration behind e
 config's `lidar_detector.tables.<table>.rows` mapping (row -> configuration name), so identical
 configurations are trained once (per seed) and shared between tables; what else differs between tables
 (the moderate column's name, the ch. 6 row) is data in the same section, never a branch on the id. A cell is
-the mean over the seeds, its noise record the per-seed values. Columns: AP_BEV at IoU 0.7 with the primary
+the mean over the seeds, its noise record the per-seed values and, where the runs stored them, the bootstrap
+replicates of the seed mean over the test frames. Columns: AP_BEV at IoU 0.7 with the primary
 recall convention (named as the thesis' columns, paired with its values), then the other convention ("...
 R11" / "... R40") and IoU 0.5, ours only.
 """
@@ -19,6 +20,7 @@ import pandas as pd
 from redsup.det3d.kitti_eval import DIFFICULTIES
 from redsup.lidar_detector.plan import LIFTING
 from redsup.tables.contract import TableFrame
+from redsup.tables.noise import replicates, with_sampling
 from redsup.tables.noise import seeds as seed_record
 
 
@@ -35,30 +37,34 @@ def _label(moderate: str, difficulty: str) -> str:
     return moderate if difficulty == "moderate" else difficulty.capitalize()
 
 
-def table_row(moderate: str, metrics: dict, recall: str = "R40", second_iou: float = 0.5) -> dict[str, float]:
-    """One row of our table from a flat metrics dict (missing keys -> NaN); ``moderate``: the thesis' name of
-    the moderate column ("Moderate" or "Medium")."""
+def column_keys(moderate: str, recall: str = "R40", second_iou: float = 0.5) -> dict[str, str]:
+    """Our table's columns -> the metric key each reads; ``moderate``: the thesis' name of the moderate column
+    ("Moderate" or "Medium")."""
     other = "R11" if recall == "R40" else "R40"
-    row: dict[str, float] = {}
-    for d in DIFFICULTIES:
-        row[f"AP_BEV {_label(moderate, d)}"] = float(metrics.get(metric_key(d, 0.7, recall), math.nan))
-    for d in DIFFICULTIES:
-        row[f"AP_BEV {_label(moderate, d)} {other}"] = float(metrics.get(metric_key(d, 0.7, other), math.nan))
-    for d in DIFFICULTIES:
-        row[f"AP_BEV@{second_iou:g} {_label(moderate, d)}"] = float(metrics.get(metric_key(d, second_iou, recall),
-                                                                               math.nan))
-    return row
+    cols = {f"AP_BEV {_label(moderate, d)}": metric_key(d, 0.7, recall) for d in DIFFICULTIES}
+    cols |= {f"AP_BEV {_label(moderate, d)} {other}": metric_key(d, 0.7, other) for d in DIFFICULTIES}
+    cols |= {f"AP_BEV@{second_iou:g} {_label(moderate, d)}": metric_key(d, second_iou, recall) for d in DIFFICULTIES}
+    return cols
+
+
+def table_row(moderate: str, metrics: dict, recall: str = "R40", second_iou: float = 0.5) -> dict[str, float]:
+    """One row of our table from a flat metrics dict (missing keys -> NaN)."""
+    return {c: float(metrics.get(k, math.nan)) for c, k in column_keys(moderate, recall, second_iou).items()}
 
 
 def build_table(moderate: str, rows: dict[str, list[dict]], recall: str = "R40",
                 second_iou: float = 0.5) -> tuple[pd.DataFrame, dict]:
     """(ours, noise): ``rows`` maps row label -> the flat metrics dicts of its seeds; a cell is their mean,
-    its noise the seed record of the per-seed values."""
+    its noise the seed record of the per-seed values, with the seed mean's test-sampling noise where every seed
+    stored bootstrap replicates of that column's metric (``kitti_eval.bootstrap_ap``)."""
+    keys = column_keys(moderate, recall, second_iou)
     lines, noise = {}, {}
     for label, per_seed in rows.items():
         cells = [table_row(moderate, m, recall, second_iou) for m in per_seed]
         lines[label] = {c: float(np.mean([x[c] for x in cells])) for c in cells[0]}
-        noise[label] = {c: seed_record([x[c] for x in cells]) for c in cells[0]}
+        noise[label] = {c: with_sampling(seed_record([x[c] for x in cells]),
+                                         [replicates(m.get("bootstrap"), keys[c]) for m in per_seed])
+                        for c in cells[0]}
     df = pd.DataFrame(lines).T
     df.index.name = "row"
     return df, noise

@@ -17,7 +17,7 @@ import numpy as np
 
 from redsup import sceneio
 from redsup.det3d.eval_frame import frames_to_eval, scene_eval_transform
-from redsup.det3d.kitti_eval import DIFFICULTIES, MAX_OCCLUSION, MAX_TRUNCATION, MIN_HEIGHT, evaluate
+from redsup.det3d.kitti_eval import DIFFICULTIES, MAX_OCCLUSION, MAX_TRUNCATION, MIN_HEIGHT, bootstrap_ap, evaluate
 from redsup.det3d.kitti_pixels import kitti_pixel_scale, scale_frames
 from redsup.det3d.scenes import gt_frames
 from redsup.lifting.data import ObjectTable
@@ -43,6 +43,22 @@ def evaluate_frames(gts: list, dets: list, iou_thresholds=(0.7, 0.5)) -> dict[st
     metrics = evaluate(gts, dets, metrics=("bev", "3d"), iou_thresholds={"Car": tuple(iou_thresholds)})
     metrics.update({k: float(v) for k, v in valid_gt_counts(gts).items()})
     return metrics
+
+
+def frame_ids(scene_dirs: list[str | Path]) -> list[str]:
+    """One id a test frame, in `split_frames`' order ("<scene folder>/<frame>"): the bootstrap's units."""
+    return [f"{Path(d).name}/{f}" for d in scene_dirs for f in range(int(sceneio.read_meta(Path(d))["n_frames"]))]
+
+
+def sampling_noise(gts: list, dets: list, scene_dirs: list[str | Path], ious: tuple[float, ...], n: int,
+                   difficulties: tuple[str, ...] = ("moderate",)) -> dict:
+    """Test-sampling noise of the split's moderate AP_BEV (the column the ch. 6 claims and the ch. 7 table's
+    lifting row are decided on) at each IoU of ``ious``: ``bootstrap_ap`` on ``n`` resamples of its frames ({} when
+    ``n`` is 0). Other columns keep their seed spread only (a resample costs two matching passes a column)."""
+    if n <= 0:
+        return {}
+    return bootstrap_ap(gts, dets, frame_ids(scene_dirs), tuple(("bev", float(iou)) for iou in ious), n,
+                        difficulties=difficulties)
 
 
 def evaluate_split(scene_dirs, table: ObjectTable, boxes: np.ndarray, camera: str = "cam_front",

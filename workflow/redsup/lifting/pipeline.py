@@ -26,7 +26,7 @@ from redsup import checkpoint
 from redsup.det3d.template import Template, build_template, spec_from_config
 from redsup.lifting import data as D
 from redsup.lifting.criterion import build_criterion
-from redsup.lifting.evaluate import evaluate_frames, split_frames
+from redsup.lifting.evaluate import evaluate_frames, sampling_noise, split_frames
 from redsup.lifting.frames import wrap_angle
 from redsup.lifting.gt_objects import gt_car_boxes, matched_targets, unmatched_gt_objects
 from redsup.lifting.model import build_model
@@ -146,8 +146,11 @@ def diagnostics(scenes: list[D.SceneInput], table: D.ObjectTable, boxes: np.ndar
 
 def run_configuration(spec: dict, cfg: dict, train_scenes: list[D.SceneInput], test_scenes: list[D.SceneInput],
                       seed: int, labels_path: str | None = None, log=None, camera: str = "cam_front",
-                      min_depth: float = 0.1, template: Template | None = None) -> tuple[torch.nn.Module, dict, dict]:
-    """Train one configuration and evaluate it. Returns (model, KITTI metrics, info for the run record).
+                      min_depth: float = 0.1, template: Template | None = None
+                      ) -> tuple[torch.nn.Module, dict, dict, dict]:
+    """Train one configuration and evaluate it. Returns (model, KITTI metrics, info for the run record, the
+    test-sampling noise of the tables' moderate AP_BEV (``evaluate.sampling_noise`` at ``eval.table_iou`` and 0.7,
+    the ch. 7 table's threshold; {} when ``eval.bootstrap`` is 0)).
     ``template``: the stage's template car (rule template_field's file, `load_template`); built here if None."""
     start = time.perf_counter()
     device = resolve_device(cfg.get("device", "cpu"))
@@ -172,6 +175,8 @@ def run_configuration(spec: dict, cfg: dict, train_scenes: list[D.SceneInput], t
     scene_dirs = [s.scene_dir for s in test_scenes]
     gts, dets = split_frames(scene_dirs, test, boxes, camera=camera)
     metrics = evaluate_frames(gts, dets, cfg["eval"]["iou"])
+    ious = tuple(dict.fromkeys((float(cfg["eval"]["table_iou"]), 0.7)))
+    boot = sampling_noise(gts, dets, scene_dirs, ious, int(cfg["eval"].get("bootstrap", 0)))
     info = {"train_objects": len(table), "train_tracked_objects": int((table.track >= 0).sum()),
             "train_steps": summary["steps"], "train_skipped_nonfinite_steps": summary["skipped_nonfinite"],
             "train_seconds": train_s, "process_cpu_seconds_after_training": train_cpu,
@@ -180,7 +185,7 @@ def run_configuration(spec: dict, cfg: dict, train_scenes: list[D.SceneInput], t
             **{f"test_bad_input/{k}": v for k, v in test.counts.items()},
             **diagnostics(test_scenes, test, boxes),
             **{f"final/{k}": v for k, v in summary["final"].items()}}
-    return model, metrics, info
+    return model, metrics, info, boot
 
 
 def make_labels(model: torch.nn.Module, spec: dict, cfg: dict, scenes: list[D.SceneInput], seed: int,

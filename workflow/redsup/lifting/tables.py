@@ -4,8 +4,8 @@ Columns as in paper_values.csv: `AP_BEV Easy` ... `AP_3D Hard` at the table IoU 
 (R40), then the same with the 11-point AP (`... (R11)`, ours only; the thesis does not say which it
 reports). Rows: `lifting.tables.<table>.rows` maps each row label to the configuration that produces it;
 each configuration is trained once per seed of `lifting.seeds`: a cell is the seed mean, its noise record
-the per-seed values (`redsup.tables.noise.seeds`). What differs between the tables is their config section
-(`rows`, `note`), never their id.
+the per-seed values (`redsup.tables.noise.seeds`) with the seed mean's bootstrap over the test frames. What
+differs between the tables is their config section (`rows`, `note`), never their id.
 """
 from __future__ import annotations
 
@@ -13,6 +13,7 @@ import numpy as np
 import pandas as pd
 
 from redsup.tables.contract import TableFrame
+from redsup.tables.noise import replicates, with_sampling
 from redsup.tables.noise import seeds as seed_record
 
 DIFFICULTIES = ("easy", "moderate", "hard")
@@ -35,15 +36,15 @@ def row_summary(rows: dict[str, str], runs: dict[str, dict]) -> str:
 METRICS = (("bev", "AP_BEV"), ("3d", "AP_3D"))
 
 
+def column_keys(iou: float = 0.5) -> dict[str, str]:
+    """The table's AP columns -> the `kitti_eval.evaluate` key each reads."""
+    return {f"{name} {d.capitalize()}{label}": f"Car_{key}_{iou:g}/{d}_{suffix}"
+            for suffix, label in (("R40", ""), ("R11", " (R11)")) for key, name in METRICS for d in DIFFICULTIES}
+
+
 def table_columns(metrics: dict, iou: float = 0.5) -> dict[str, float]:
     """One row's cells from `kitti_eval.evaluate`'s flat dict."""
-    out = {}
-    for suffix, label in (("R40", ""), ("R11", " (R11)")):
-        for key, name in METRICS:
-            for d in DIFFICULTIES:
-                out[f"{name} {d.capitalize()}{label}"] = float(metrics.get(f"Car_{key}_{iou:g}/{d}_{suffix}",
-                                                                         float("nan")))
-    return out
+    return {col: float(metrics.get(key, float("nan"))) for col, key in column_keys(iou).items()}
 
 
 DIAGNOSTICS = {"diag/bev_centre_within_1m": "centre < 1 m (%)", "diag/yaw_within_20deg_mod_pi": "yaw < 20° (%)"}
@@ -64,7 +65,9 @@ def gt_count_note(infos: dict[str, dict]) -> str:
 
 def seed_table(rows: list, results: dict, iou: float = 0.5) -> tuple[pd.DataFrame, dict]:
     """(ours, noise) from contract rows (label, run, step) where a label repeats once per seed: each cell is
-    the mean over the label's runs, its noise the seed record of their values (diagnostic columns too)."""
+    the mean over the label's runs, its noise the seed record of their values (diagnostic columns too), with
+    the bootstrap replicates of the seed mean over the test frames for the AP columns where the runs stored
+    them (`evaluate.sampling_noise`)."""
     by_label: dict[str, list[str]] = {}
     for label, run, _ in rows:
         by_label.setdefault(label, []).append(run)
@@ -77,7 +80,10 @@ def seed_table(rows: list, results: dict, iou: float = 0.5) -> tuple[pd.DataFram
                                                    for key, name in DIAGNOSTICS.items()} for r in runs]
         cols = list(cells[0])
         lines.append({"row": label, **{c: float(np.mean([x[c] for x in cells])) for c in cols}})
-        noise[label] = {c: seed_record([x[c] for x in cells]) for c in cols}
+        keys = column_keys(iou)   # AP columns: the seed mean's test-sampling noise where every seed stored one
+        noise[label] = {c: with_sampling(seed_record([x[c] for x in cells]),
+                                         [replicates(results[r].get("bootstrap"), keys.get(c, "")) for r in runs])
+                        for c in cols}
     return pd.DataFrame(lines).set_index("row"), noise
 
 

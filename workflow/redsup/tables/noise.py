@@ -11,10 +11,21 @@ A cell of ours may carry a ``Noise`` record (JSON-able dict):
   a function of the sorted unit ids only (``resample_indices``), so two rows evaluated on the same units
   (same ``units`` digest) share their resamples and their replicate differences form a *paired* bootstrap.
 
+- A seed record may also carry the test-sampling noise of its mean (``with_sampling``): ``"boot"``, the B
+  bootstrap replicates of the seed mean (replicate r = the mean over the seeds of each seed's r-th replicate,
+  which resample the same units, since the resample indices depend on the unit ids only), with their
+  ``"units"`` digest. The seeds all evaluate on the same test units, so their spread says nothing about which
+  units those are; ``boot`` does.
+
 ``difference_interval(a, b)`` is the 95 % interval of ``a - b``: paired bootstrap quantiles when both are
 bootstrap records on the same units; a paired t interval of the per-seed differences when both are seed
 records of the same trained models (same ``pair``); otherwise a Welch-style normal / t interval from the two
-variances (seed std² / n, bootstrap variance). Without any noise record the interval is the point difference.
+variances (seed std² / n, bootstrap variance). When a seed record carries ``boot``, the interval adds the
+test-sampling variance to the seed variance (paired over the units where both sides have them on the same
+units), a two-way (seed x test unit) random-effects reading, with Welch-Satterthwaite degrees of freedom (the
+bootstrap part a large sample) and a half width never narrower than the seed part's or the bootstrap part's
+own: adding the sampling noise never narrows an interval.
+Without any noise record the interval is the point difference.
 """
 from __future__ import annotations
 
@@ -71,12 +82,37 @@ def bootstrap(per_unit: Mapping | None = None, *, unit_ids: Sequence | None = No
             "n_units": len(per_unit)}
 
 
+def replicates(payload: Mapping | None, key: str) -> dict | None:
+    """Bootstrap record of one metric from an evaluation's stored replicates (``{"units", "n_units", "values":
+    {key: [B floats]}}``, e.g. ``redsup.det3d.kitti_eval.bootstrap_ap``), or None when it has none for ``key``."""
+    if not payload or key not in payload.get("values", {}):
+        return None
+    return {"kind": "bootstrap", "values": [float(v) for v in payload["values"][key]], "units": payload["units"],
+            "n_units": int(payload["n_units"])}
+
+
 def seeds(values: Sequence[float], pair: str | None = None) -> dict:
     """Seed record of one cell (one value per training seed); ``pair`` names the trained models the values
     come from, in seed order (records with the same ``pair`` are compared seed by seed)."""
     rec = {"kind": "seeds", "values": [float(v) for v in values]}
     if pair is not None:
         rec["pair"] = str(pair)
+    return rec
+
+
+def with_sampling(seed_record: Mapping, boot_records: Sequence[Mapping | None]) -> dict:
+    """``seed_record`` with the test-sampling noise of its mean: ``boot_records`` are the seeds' bootstrap
+    records (one a seed, in seed order). Attached only when every seed has one, over the same units with the
+    same number of replicates (then replicate r of the mean is the mean of the seeds' r-th replicates);
+    otherwise the record is returned unchanged."""
+    rec = dict(seed_record)
+    recs = list(boot_records)
+    if (not recs or len(recs) != len(rec["values"]) or any(not b or b.get("kind") != "bootstrap" for b in recs)
+            or len({b["units"] for b in recs}) != 1 or len({len(b["values"]) for b in recs}) != 1):
+        return rec
+    rec["boot"] = [float(x) for x in np.mean([np.asarray(b["values"], float) for b in recs], axis=0)]
+    rec["units"] = recs[0]["units"]
+    rec["n_units"] = int(recs[0].get("n_units", MIN_UNITS))
     return rec
 
 
@@ -117,9 +153,12 @@ def difference_interval(a: float, b: float, noise_a: Mapping | None = None,
         return math.nan, math.nan, "non-finite"
     if abs(d) <= REL_TIE * max(1.0, abs(a), abs(b)):
         d = 0.0  # a floating-point tie
-    few = [n for n in (noise_a, noise_b) if n and n["kind"] == "bootstrap" and n.get("n_units", MIN_UNITS) < MIN_UNITS]
+    few = [n for n in (noise_a, noise_b) if n and (n["kind"] == "bootstrap" or "boot" in n)
+           and n.get("n_units", MIN_UNITS) < MIN_UNITS]
     if few:
         return math.nan, math.nan, f"bootstrap over fewer than {MIN_UNITS} units"
+    if any(n and n["kind"] == "seeds" and "boot" in n for n in (noise_a, noise_b)):
+        return _seeds_and_sampling(d, noise_a, noise_b)
     if (noise_a and noise_b and noise_a["kind"] == noise_b["kind"] == "bootstrap"
             and noise_a.get("units") == noise_b.get("units")
             and len(noise_a["values"]) == len(noise_b["values"])):
@@ -150,6 +189,58 @@ def difference_interval(a: float, b: float, noise_a: Mapping | None = None,
     half = t975(df) * math.sqrt(va + vb)
     methods = sorted({n["kind"] for n in (noise_a, noise_b) if n})
     return d - half, d + half, "+".join(methods) + " (unpaired)"
+
+
+def _boot_of(noise: Mapping | None) -> np.ndarray | None:
+    if not noise:
+        return None
+    if noise["kind"] == "bootstrap":
+        return np.asarray(noise["values"], float)
+    return np.asarray(noise["boot"], float) if "boot" in noise else None
+
+
+def _seeds_and_sampling(d: float, noise_a: Mapping | None, noise_b: Mapping | None) -> tuple[float, float, str]:
+    """Interval of ``d = a - b`` when a seed record carries its test-sampling replicates (``with_sampling``):
+    seed variance of the difference (paired seed by seed when both are records of the same models) plus its
+    bootstrap variance (paired when both have replicates on the same units); Welch-Satterthwaite t, the half width
+    at least each part's own."""
+    parts: list[tuple[float, float | None]] = []  # (variance, df or None for a large sample)
+    how = []
+    sa = noise_a if noise_a and noise_a["kind"] == "seeds" else None
+    sb = noise_b if noise_b and noise_b["kind"] == "seeds" else None
+    if (sa and sb and sa.get("pair") and sa.get("pair") == sb.get("pair")
+            and len(sa["values"]) == len(sb["values"]) >= 2):
+        diff = np.asarray(sa["values"], float) - np.asarray(sb["values"], float)
+        parts.append((float(np.var(diff, ddof=1)) / len(diff), len(diff) - 1))
+        how.append("paired seeds")
+    else:
+        for s in (sa, sb):
+            if s and len(s["values"]) >= 2:
+                parts.append((float(np.var(np.asarray(s["values"], float), ddof=1)) / len(s["values"]),
+                              len(s["values"]) - 1))
+        how.append("seeds")
+    ba, bb = _boot_of(noise_a), _boot_of(noise_b)
+    if (ba is not None and bb is not None and noise_a.get("units") == noise_b.get("units")
+            and len(ba) == len(bb)):
+        parts.append((float(np.var(ba - bb, ddof=1)), None))
+        how.append("paired test bootstrap")
+    else:
+        parts += [(float(np.var(b, ddof=1)), None) for b in (ba, bb) if b is not None]
+        how.append("test bootstrap (unpaired)")
+    if not all(math.isfinite(v) for v, _ in parts):
+        return math.nan, math.nan, "non-finite"
+    total = sum(v for v, _ in parts)
+    if total == 0.0:
+        return d, d, "seeds/bootstrap without spread"
+    # Welch-Satterthwaite over both parts (the bootstrap part a large sample). Its df grow with the well-measured
+    # bootstrap part, so t can shrink more than the variance grows: the half width is never narrower than either
+    # part's own interval, and adding the sampling noise never narrows an interval
+    seed_total = sum(v for v, df in parts if df)
+    den = sum(v ** 2 / df for v, df in parts if v > 0 and df)
+    half = max(t975(total ** 2 / den if den > 0 else None) * math.sqrt(total),
+               t975(seed_total ** 2 / den if den > 0 else None) * math.sqrt(seed_total),
+               t975(None) * math.sqrt(total - seed_total))
+    return d - half, d + half, " + ".join(how)
 
 
 def verdict_of_interval(lo: float, hi: float) -> str | None:

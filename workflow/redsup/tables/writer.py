@@ -338,7 +338,8 @@ def write_scorecard(score_jsons: Iterable[str | Path], out_md, registry: dict | 
     head = " | ".join(VERDICTS)
     md = ["# Scorecard: paper vs ours", "",
           f"{len(scores)} tables. Each claim of the theses is decided on our numbers with the measured noise "
-          "(95 % intervals over training seeds or a paired bootstrap over the test units): **reproduces** "
+          "(95 % intervals over the training seeds and, where a row keeps per-unit results, a paired bootstrap "
+          "over the test units; each verdict names what its interval covers): **reproduces** "
           "(the claimed effect is beyond the noise), **inconclusive** (inside the noise, a tie, or a cell "
           "missing), **contradicted** (the opposite effect is beyond the noise); **not testable** (about prior "
           "work, real data, or contradicted by the thesis' own table) and **data description** (true by how "

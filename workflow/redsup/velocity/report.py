@@ -94,8 +94,8 @@ def bootstrap_cells(record: dict, layout: str) -> dict[str, dict]:
 
 def configuration_table(layout: str, rows, results: dict[str, dict]):
     """(ours, noise) of Table II (layout ``errors``) or the synthetic ablation (``ablation``): one line per row
-    label; a label with several runs (seeds) is their mean with the seed spread, a single run gets a paired
-    bootstrap over the test vehicles."""
+    label; a label with several runs (seeds) is their mean with the seed spread and the paired bootstrap of that
+    mean over the test vehicles (``noise.with_sampling``), a single run gets a paired bootstrap over them."""
     from redsup.tables import noise as noise_lib
     from redsup.velocity.summary import ablation_table, table2
 
@@ -110,7 +110,9 @@ def configuration_table(layout: str, rows, results: dict[str, dict]):
         if len(runs) > 1:
             for col in line.columns:
                 line.at[label, col] = float(np.mean([f.at[label, col] for f in per_seed]))
-            noise[label] = {col: noise_lib.seeds([f.at[label, col] for f in per_seed])
+            boots = [bootstrap_cells(results[r], layout) for r in runs]   # each seed's test-vehicle bootstrap
+            noise[label] = {col: noise_lib.with_sampling(noise_lib.seeds([f.at[label, col] for f in per_seed]),
+                                                         [b.get(col) for b in boots])
                             for col in error_columns(layout) if col in line.columns}
         else:
             noise[label] = bootstrap_cells(results[runs[0]], layout)
