@@ -46,6 +46,11 @@ def test_every_configuration_trained_once_per_seed_with_curves(built, cfg):
                 v = metrics[f"Car_bev_0.7/{d}_R40"]
                 assert 0.0 <= v <= 100.0 or math.isnan(v)
             assert metrics["frames"] > 0 and metrics["infer_fps"] > 0
+            # the AP's bootstrap over the test frames (the cells' test-sampling noise), one id a frame
+            boot = metrics["bootstrap"]
+            assert boot["n_units"] == metrics["frames"] and sorted(boot["values"]) == sorted(
+                f"Car_bev_0.7/{d}_{r}" for d in ("easy", "moderate", "hard") for r in ("R11", "R40"))
+            assert all(len(v) == cfg["eval"]["bootstrap"] for v in boot["values"].values())
             ckpt = checkpoint.load(built / f"results/lidar_detector/models/{name}/seed{k}.pt", "lidar_detector")
             assert ckpt["config"]["profile"] == "tiny" and ckpt["meta"]["configuration"] == name
             record = json.loads((built / f"results/runs/lidar_detector/metrics/{name}/seed{k}.json").read_text())

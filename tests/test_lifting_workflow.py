@@ -47,6 +47,10 @@ def test_every_configuration_has_metrics_and_a_model_per_seed(built):
         for k in cfg["seeds"]:
             metrics = json.loads((built / "results" / "lifting" / "metrics" / run / f"seed{k}.json").read_text())
             assert "Car_bev_0.5/moderate_R40" in metrics and "Car_3d_0.5/hard_R11" in metrics
+            # the moderate AP_BEV's bootstrap over the test frames, at every evaluated IoU
+            boot = metrics["bootstrap"]
+            assert sorted(boot["values"]) == [f"Car_bev_{iou:g}/moderate_{r}" for iou in (0.5, 0.7) for r in ("R11", "R40")]
+            assert all(len(v) == cfg["eval"]["bootstrap"] for v in boot["values"].values())
             ckpt = checkpoint.load(built / "results" / "lifting" / "models" / run / f"seed{k}.pt", "lifting")
             assert ckpt["config"]["profile"] == "tiny" and ckpt["meta"]["configuration"] == run
             record = json.loads((built / "results/runs/lifting/metrics" / run / f"seed{k}.json").read_text())

@@ -490,6 +490,8 @@ def test_seed_means_carry_their_test_sampling_noise():
     mixed = noise.with_sampling(noise.seeds(a2), [_boot([0, 1, 0, 1]), _boot([0, 1, 0, 1], units="v"),
                                                   _boot([0, 1, 0, 1])])
     assert "boot" not in mixed
+    few = noise.with_sampling(noise.seeds(a2), [_boot([0, 1, 0, 1], n_units=2)] * 3)  # 2 units measure nothing:
+    assert "boot" not in few                                                     # the seeds' interval stays
     # a one-seed row's bootstrap record against a seed mean with replicates on the same units pairs its replicates
     lo4, hi4, how4 = noise.difference_interval(0.12, 0.14, ra2, _boot([0.005, 0.005, 0.005, 0.005]))
     assert how4 == "seeds + paired test bootstrap"

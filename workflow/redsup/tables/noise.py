@@ -102,13 +102,14 @@ def seeds(values: Sequence[float], pair: str | None = None) -> dict:
 
 def with_sampling(seed_record: Mapping, boot_records: Sequence[Mapping | None]) -> dict:
     """``seed_record`` with the test-sampling noise of its mean: ``boot_records`` are the seeds' bootstrap
-    records (one a seed, in seed order). Attached only when every seed has one, over the same units with the
-    same number of replicates (then replicate r of the mean is the mean of the seeds' r-th replicates);
-    otherwise the record is returned unchanged."""
+    records (one a seed, in seed order). Attached only when every seed has one, over the same units (at least
+    MIN_UNITS of them) with the same number of replicates (then replicate r of the mean is the mean of the seeds'
+    r-th replicates); otherwise the record is returned unchanged."""
     rec = dict(seed_record)
     recs = list(boot_records)
     if (not recs or len(recs) != len(rec["values"]) or any(not b or b.get("kind") != "bootstrap" for b in recs)
-            or len({b["units"] for b in recs}) != 1 or len({len(b["values"]) for b in recs}) != 1):
+            or len({b["units"] for b in recs}) != 1 or len({len(b["values"]) for b in recs}) != 1
+            or int(recs[0].get("n_units", MIN_UNITS)) < MIN_UNITS):
         return rec
     rec["boot"] = [float(x) for x in np.mean([np.asarray(b["values"], float) for b in recs], axis=0)]
     rec["units"] = recs[0]["units"]
@@ -153,8 +154,7 @@ def difference_interval(a: float, b: float, noise_a: Mapping | None = None,
         return math.nan, math.nan, "non-finite"
     if abs(d) <= REL_TIE * max(1.0, abs(a), abs(b)):
         d = 0.0  # a floating-point tie
-    few = [n for n in (noise_a, noise_b) if n and (n["kind"] == "bootstrap" or "boot" in n)
-           and n.get("n_units", MIN_UNITS) < MIN_UNITS]
+    few = [n for n in (noise_a, noise_b) if n and n["kind"] == "bootstrap" and n.get("n_units", MIN_UNITS) < MIN_UNITS]
     if few:
         return math.nan, math.nan, f"bootstrap over fewer than {MIN_UNITS} units"
     if any(n and n["kind"] == "seeds" and "boot" in n for n in (noise_a, noise_b)):
