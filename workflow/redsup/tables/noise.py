@@ -168,10 +168,8 @@ def difference_interval(a: float, b: float, noise_a: Mapping | None = None,
         # basic (pivot-free) percentile interval of the paired replicate differences, centred on d
         lo, hi = np.quantile(diff - diff.mean(), [(1 - LEVEL) / 2, (1 + LEVEL) / 2])
         return d + float(lo), d + float(hi), "paired bootstrap"
-    if (noise_a and noise_b and noise_a["kind"] == noise_b["kind"] == "seeds" and noise_a.get("pair")
-            and noise_a.get("pair") == noise_b.get("pair")
-            and len(noise_a["values"]) == len(noise_b["values"]) >= 2):
-        diff = np.asarray(noise_a["values"], float) - np.asarray(noise_b["values"], float)
+    diff = _paired_seed_differences(noise_a, noise_b)
+    if diff is not None:
         if not np.all(np.isfinite(diff)):
             return math.nan, math.nan, "non-finite"
         half = t975(len(diff) - 1) * float(np.std(diff, ddof=1)) / math.sqrt(len(diff))
@@ -191,6 +189,15 @@ def difference_interval(a: float, b: float, noise_a: Mapping | None = None,
     return d - half, d + half, "+".join(methods) + " (unpaired)"
 
 
+def _paired_seed_differences(noise_a: Mapping | None, noise_b: Mapping | None) -> np.ndarray | None:
+    """Per-seed differences a - b when both are seed records of the same trained models (same ``pair``, the same
+    number of seeds, at least 2), else None."""
+    if (noise_a and noise_b and noise_a["kind"] == noise_b["kind"] == "seeds" and noise_a.get("pair")
+            and noise_a.get("pair") == noise_b.get("pair") and len(noise_a["values"]) == len(noise_b["values"]) >= 2):
+        return np.asarray(noise_a["values"], float) - np.asarray(noise_b["values"], float)
+    return None
+
+
 def _boot_of(noise: Mapping | None) -> np.ndarray | None:
     if not noise:
         return None
@@ -208,9 +215,8 @@ def _seeds_and_sampling(d: float, noise_a: Mapping | None, noise_b: Mapping | No
     how = []
     sa = noise_a if noise_a and noise_a["kind"] == "seeds" else None
     sb = noise_b if noise_b and noise_b["kind"] == "seeds" else None
-    if (sa and sb and sa.get("pair") and sa.get("pair") == sb.get("pair")
-            and len(sa["values"]) == len(sb["values"]) >= 2):
-        diff = np.asarray(sa["values"], float) - np.asarray(sb["values"], float)
+    diff = _paired_seed_differences(noise_a, noise_b)
+    if diff is not None:
         parts.append((float(np.var(diff, ddof=1)) / len(diff), len(diff) - 1))
         how.append("paired seeds")
     else:
