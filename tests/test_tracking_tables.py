@@ -1,4 +1,4 @@
-"""Per-job benchmarks (redsup.benchmarks) and the table view of the MLflow store: every child run tagged with
+"""Per-job benchmarks (redsup.job_benchmarks) and the table view of the MLflow store: every child run tagged with
 every table it serves, the one-click filter per table, table files on the parent, job time and memory as
 metrics. Hand-made records and benchmark files, no workflow run."""
 from __future__ import annotations
@@ -11,7 +11,7 @@ import pytest
 
 pytest.importorskip("mlflow")
 
-from redsup import benchmarks, runlog, tracking  # noqa: E402
+from redsup import job_benchmarks, runlog, tracking  # noqa: E402
 
 HEADER = "s\th:m:s\tmax_rss\tmax_vms\tmax_uss\tmax_pss\tio_in\tio_out\tmean_load\tcpu_time\n"
 T1, T2 = "mccraith_ch3_table1", "mccraith_ch3_table2"  # velocity: result results/velocity/<run>/metrics.json
@@ -27,27 +27,27 @@ def _bench(path: Path, s, rss, cpu):
 # ------------------------------------------------------------------------------------- benchmarks
 def test_read_benchmark_and_job_metrics(tmp_path):
     _bench(tmp_path / "a.tsv", 12.5, 310.25, 20.0)
-    assert benchmarks.job_metrics(tmp_path / "a.tsv") == {"job_wall_s": 12.5, "job_max_rss_mb": 310.25,
+    assert job_benchmarks.job_metrics(tmp_path / "a.tsv") == {"job_wall_s": 12.5, "job_max_rss_mb": 310.25,
                                                           "job_cpu_s": 20.0}
     (tmp_path / "b.tsv").write_text(HEADER + "0.4\t0:00:00\tNA\tNA\tNA\tNA\tNA\tNA\tNA\t0.3\n")
-    assert benchmarks.job_metrics(tmp_path / "b.tsv") == {"job_wall_s": 0.4, "job_cpu_s": 0.3}  # no NaN metric
+    assert job_benchmarks.job_metrics(tmp_path / "b.tsv") == {"job_wall_s": 0.4, "job_cpu_s": 0.3}  # no NaN metric
     _bench(tmp_path / "z.tsv", 0.9, "0.00", 0.5)  # a job shorter than the sampler's first look: RSS not measured
-    assert benchmarks.job_metrics(tmp_path / "z.tsv") == {"job_wall_s": 0.9, "job_cpu_s": 0.5}
+    assert job_benchmarks.job_metrics(tmp_path / "z.tsv") == {"job_wall_s": 0.9, "job_cpu_s": 0.5}
     # the job's own CPU seconds (its run record) replace the sampled 20.0; NaN or None keeps the sample
-    assert benchmarks.job_metrics(tmp_path / "a.tsv", 31.5)["job_cpu_s"] == 31.5
-    assert benchmarks.job_metrics(tmp_path / "a.tsv", math.nan)["job_cpu_s"] == 20.0
-    assert math.isnan(benchmarks.read_benchmark(tmp_path / "z.tsv")["max_rss"])
+    assert job_benchmarks.job_metrics(tmp_path / "a.tsv", 31.5)["job_cpu_s"] == 31.5
+    assert job_benchmarks.job_metrics(tmp_path / "a.tsv", math.nan)["job_cpu_s"] == 20.0
+    assert math.isnan(job_benchmarks.read_benchmark(tmp_path / "z.tsv")["max_rss"])
     (tmp_path / "c.tsv").write_text(HEADER)
     with pytest.raises(ValueError, match="c.tsv"):
-        benchmarks.read_benchmark(tmp_path / "c.tsv")
+        job_benchmarks.read_benchmark(tmp_path / "c.tsv")
 
 
 def test_benchmark_path_mirrors_the_run_record():
-    assert benchmarks.benchmark_path("results/runs/raw/world_kitti/train_000.json", "world_scene") == \
+    assert job_benchmarks.benchmark_path("results/runs/raw/world_kitti/train_000.json", "world_scene") == \
         Path("results/benchmarks/world_scene/raw/world_kitti/train_000.tsv")
     for record, rule in (("results/runs/raw/world_kitti/train_000.json", "world_scene"),
                          ("results/runs/depth/eval/instance_M_lr0.1.json", "depth_eval")):   # a dot, not a suffix
-        assert benchmarks.record_path(benchmarks.benchmark_path(record, rule)) == Path(record)
+        assert job_benchmarks.record_path(job_benchmarks.benchmark_path(record, rule)) == Path(record)
 
 
 def test_summary_per_rule_and_stage_sorted_by_total(tmp_path):
@@ -65,20 +65,20 @@ def test_summary_per_rule_and_stage_sorted_by_total(tmp_path):
     (tmp_path / "runs/raw/d/train_000.json").write_text(json.dumps({"job": {"uid": "v"}}))   # older: no cpu_s
     (tmp_path / "runs/tables").mkdir(parents=True)   # a dot in the job's name is not a suffix
     (tmp_path / "runs/tables/t_lr0.1.json").write_text(json.dumps({"job": {"uid": "w", "cpu_s": 1.25}}))
-    jobs = benchmarks.collect(root, stages, exclude=("benchmark_summary",))
+    jobs = job_benchmarks.collect(root, stages, exclude=("benchmark_summary",))
     assert len(jobs) == 4
     assert [(j["job"], j["cpu_s"], j["cpu_source"]) for j in jobs if j["rule"] in ("world_scene", "table")] == \
         [("tables/t_lr0.1", 1.25, "job"), ("raw/d/train_000", 9.0, "benchmark"), ("raw/d/train_001", 31.5, "job")]
-    rules = benchmarks.summarise(jobs, "rule")
+    rules = job_benchmarks.summarise(jobs, "rule")
     assert [r["rule"] for r in rules] == ["world_scene", "train_depth", "table"]
     ws = rules[0]
     assert (ws["jobs"], ws["total_s"], ws["mean_s"], ws["max_s"], ws["cpu_s"], ws["peak_rss_mb"]) == \
         (2, 40.0, 20.0, 30.0, 40.5, 250.0)
     assert ws["stage"] == "world"
-    by_stage = benchmarks.summarise(jobs, "stage")
+    by_stage = job_benchmarks.summarise(jobs, "stage")
     assert [(r["stage"], r["total_s"]) for r in by_stage] == [("world", 40.0), ("depth", 25.0), ("tables", 1.0)]
     md, png = tmp_path / "run_time.md", tmp_path / "run_time.png"
-    benchmarks.write_summary(root, md, png, stages, exclude=("benchmark_summary",))
+    job_benchmarks.write_summary(root, md, png, stages, exclude=("benchmark_summary",))
     text = md.read_text()
     assert "66.0 job-seconds" in text and "| world_scene | world | 2 | 40.0 | 60.6 % | 20.00 | 30.00 | 40.5 | 250.0 |" \
         in text
@@ -89,7 +89,7 @@ def test_summary_per_rule_and_stage_sorted_by_total(tmp_path):
     assert text.index("| world |") < text.index("| depth |") < text.index("| tables |")
     assert png.stat().st_size > 5000
     with pytest.raises(ValueError, match="no benchmark files"):
-        benchmarks.write_summary(tmp_path / "none", md, png, stages)
+        job_benchmarks.write_summary(tmp_path / "none", md, png, stages)
 
 
 # ------------------------------------------------------------------------------- tables in MLflow

@@ -533,7 +533,7 @@ def sync_records(tracking_uri: str, plan: Mapping[str, Any], runs_root: str | Pa
     the store), which is deleted (MLflow's soft delete); a finished one is kept as history. Every child is
     tagged with the tables it serves (`table_memberships`; tags of superseded runs are removed) and carries
     its job's wall time, CPU time and peak RSS from the job's benchmark file
-    (`<runs_root>/../benchmarks/<rule>/...`, `redsup.benchmarks`; the CPU time from the record's own
+    (`<runs_root>/../benchmarks/<rule>/...`, `redsup.job_benchmarks`; the CPU time from the record's own
     ``job.cpu_s`` where it has one). The parents of `table_ids` get the table
     and figure files as artifacts (`results_root` = the folder above `runs_root`). One sync at a time
     (a file lock beside `out_json`). Returns (and writes to `out_json`) the registry plus counts.
@@ -546,7 +546,7 @@ def sync_records(tracking_uri: str, plan: Mapping[str, Any], runs_root: str | Pa
 
 def _sync_records(tracking_uri, plan, runs_root: Path, out_json, *, artifact_root, experiment_prefix, table_ids,
                   final) -> dict:
-    from redsup.benchmarks import benchmark_path, job_metrics
+    from redsup.job_benchmarks import benchmark_path, job_metrics
 
     records = []
     rids: dict[Path, str] = {}
