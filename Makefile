@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 PROFILE ?= default
 
-.PHONY: venv browser reproduce test lint dry-run mlflow mlflow-sync report rulegraph run-time clean
+.PHONY: venv browser reproduce test lint dry-run mlflow mlflow-sync report rulegraph run-time readme-results clean
 
 $(BIN)/snakemake: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -55,6 +55,11 @@ rulegraph: venv
 ## Wall time and peak memory per rule and stage of the last run: results/tables/run_time.md
 run-time: venv
 	$(BIN)/snakemake run_time --config profile=$(PROFILE)
+
+## The README's results block (between <!-- results:start --> and <!-- results:end -->) from the last build's
+## results/tables/scorecard.md (after `make reproduce`)
+readme-results: venv
+	$(BIN)/python -m redsup.readme results --scorecard results/tables/scorecard.md --runs results/runs --readme README.md
 
 clean:
 	rm -rf results/* .snakemake
