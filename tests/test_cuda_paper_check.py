@@ -1,7 +1,7 @@
-"""benchmarks/cuda_paper_check.py, the device check of the paper profile's trainings, runs on the CPU with the tiny
-profile: every family trains through its real library function, the report lists each with finite losses and a
-step time, a family that raises is reported FAILED (exit code 1) while the others still run, and the script imports
-neither mlflow nor snakemake (the GPU machine has neither)."""
+"""redsup.device_check (command line: benchmarks/cuda_paper_check.py), the device check of the paper profile's
+trainings, runs on the CPU with the tiny profile: every family trains through its real library function, the report
+lists each with finite losses and a step time, a family that raises is reported FAILED (exit code 1) while the others
+still run, and the check imports neither mlflow nor snakemake (the GPU machine has neither)."""
 import json
 import math
 import os
@@ -10,13 +10,12 @@ import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-SCRIPT = ROOT / "benchmarks" / "cuda_paper_check.py"
 
 
 def _run(args, code=None):
-    env = {**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT / "workflow"), str(ROOT / "benchmarks"),
-                                                                     os.environ.get("PYTHONPATH")]))}
-    cmd = [sys.executable, "-c", code, *args] if code else [sys.executable, str(SCRIPT), *args]
+    env = {**os.environ,
+           "PYTHONPATH": os.pathsep.join(filter(None, [str(ROOT / "workflow"), os.environ.get("PYTHONPATH")]))}
+    cmd = [sys.executable, "-c", code, *args] if code else [sys.executable, "-m", "redsup.device_check", *args]
     return subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=ROOT, timeout=300)
 
 
@@ -41,7 +40,7 @@ def test_every_family_trains_on_cpu_with_the_tiny_profile(tmp_path):
 
 
 def test_a_failing_family_is_reported_and_the_next_runs(tmp_path):
-    code = ("import sys, cuda_paper_check as c\n"
+    code = ("import sys\nfrom redsup import device_check as c\n"
             "def boom(*a, **k):\n    raise RuntimeError('Expected all tensors to be on the same device')\n"
             "c.lift_train.train = boom\n"
             "import atexit\n"     # after the run: what the script imported, the failed family's path included

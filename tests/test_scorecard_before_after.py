@@ -1,13 +1,8 @@
-"""docs/scorecard_before_after.py: the old (✔/✘) rules and the five categories on the same build."""
-import importlib.util
-from pathlib import Path
-
+"""redsup.tables.before_after (tools/scorecard_before_after.py): the old (✔/✘) rules and the five categories on
+the same build."""
 import pandas as pd
 
-ROOT = Path(__file__).resolve().parents[1]
-spec = importlib.util.spec_from_file_location("scorecard_before_after", ROOT / "docs" / "scorecard_before_after.py")
-sba = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(sba)
+from redsup.tables import before_after as sba
 
 
 def test_the_old_rules_let_a_tie_win_the_new_ones_do_not():

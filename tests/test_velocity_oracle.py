@@ -1,12 +1,8 @@
-"""benchmarks/velocity_oracle.py's occlusion proxy (the far bin's drift split by partial occlusion), by hand."""
-import sys
-from pathlib import Path
-
+"""The occlusion proxy of studies/velocity_oracle.py (`redsup.velocity.diagnosis.hidden_fraction`: the far bin's
+drift split by partial occlusion), by hand."""
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
-
-from velocity_oracle import hidden_fraction  # noqa: E402
+from redsup.velocity.diagnosis import hidden_fraction
 
 
 def test_hidden_fraction_by_hand():

@@ -6,7 +6,7 @@ threads to `--cores` only when it has fewer, so the count does not follow `--cor
 deterministic kernels (`torch.use_deterministic_algorithms`, warning instead of failing for the rare op
 without one). Seeds are the caller's (`torch.manual_seed(seed)` before building and training). Tested by
 tests/test_drills_determinism.py (each training function twice gives identical weights) and, end to end,
-by benchmarks/drill_kill_resume.py and drill_parallel.py (byte-identical tables).
+by drills/drill_kill_resume.py and drill_parallel.py (byte-identical tables).
 """
 from __future__ import annotations
 

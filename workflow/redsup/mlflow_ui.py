@@ -1,5 +1,5 @@
 """Looking at a store through MLflow's own UI: a consistent copy of a sqlite store, `mlflow server` on a free
-port of 127.0.0.1, and the headless browser that renders its pages (the UI test, docs/make_screenshot.py)."""
+port of 127.0.0.1, and the headless browser that renders its pages (the UI test, tools/make_screenshot.py)."""
 from __future__ import annotations
 
 import contextlib

@@ -1,6 +1,6 @@
 """Direct minimisation of the plain one-sided Chamfer loss of McCraith ch. 6 eq. (1) over the translation of the
 template at a given yaw: what the loss itself prefers for one point set, without a network. Used to separate
-the loss's pull by outliers from how well a network learns it (benchmarks/bench_inmask_outliers.py --optimum)."""
+the loss's pull by outliers from how well a network learns it (studies/inmask_outliers.py --optimum)."""
 from __future__ import annotations
 
 import torch

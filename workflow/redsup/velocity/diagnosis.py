@@ -18,6 +18,7 @@ For every split, on the MedianFlow boxes of every annotated vehicle:
 
 With the true distance in every frame (rendered clips only), `truth_diagnosis` splits that into the size change
 to resolve, the tracker's error on it, and the change of the relative velocity within the clip.
+`hidden_fraction` is the partial-occlusion proxy of studies/velocity_oracle.py.
 """
 from __future__ import annotations
 
@@ -44,7 +45,7 @@ def scale_jitter(boxes: np.ndarray, degree: int = 2) -> np.ndarray:
     """(N,) frame-to-frame noise of the tracked size: the std of log s_t (s = sqrt(w h)) of tracks (N, T, 4) around
     its least-squares polynomial of ``degree`` in t. A car's true log size over a 2-s clip is that smooth (on the
     world's val clips the residual of -log Z, from the true distances, is 0.0001 at the median and 0.0009 at most:
-    benchmarks/bench_track_jitter.py --truth), so the residual is the tracker's jitter, measurable on real clips
+    studies/track_jitter.py --truth), so the residual is the tracker's jitter, measurable on real clips
     without ground truth. NaN where a size is not positive."""
     size = np.sqrt(np.clip(boxes[:, :, 2], 0, None) * np.clip(boxes[:, :, 3], 0, None))
     out = np.full(len(boxes), np.nan)
@@ -167,3 +168,20 @@ def diagnosis_note(metrics: dict, split: str = "test") -> str:
             f"true motion of the box bottom over the clip {row('motion_px')} px (medians); the tracker's scale "
             f"signal: last tracked box {row('box_px')} px high (median), correlation of the v_z its size change "
             f"implies with the true v_z {row('scale_corr')} (the information a box-based MLP can use)")
+
+
+def hidden_fraction(boxes: np.ndarray, depth: np.ndarray, rows) -> np.ndarray:
+    """(len(rows),) for each vehicle ``rows[j]`` the largest share, over the frames, of its box covered by the box
+    of one vehicle nearer to the camera (boxes (V, frames, 4) x, y, w, h; depth (V, frames)): a silhouette-box
+    proxy of partial occlusion during the clip."""
+    x0, y0 = boxes[..., 0], boxes[..., 1]
+    x1, y1 = x0 + boxes[..., 2], y0 + boxes[..., 3]
+    out = np.zeros(len(rows))
+    for j, r in enumerate(rows):
+        w = np.clip(np.minimum(x1[r], x1) - np.maximum(x0[r], x0), 0, None)
+        h = np.clip(np.minimum(y1[r], y1) - np.maximum(y0[r], y0), 0, None)
+        nearer = (depth > 0) & (depth < depth[r])
+        area = np.clip(boxes[r, :, 2] * boxes[r, :, 3], 1e-9, None)
+        share = np.where(nearer & (depth[r] > 0), w * h, 0.0) / area
+        out[j] = share.max()
+    return out

@@ -64,7 +64,7 @@ def clip_motorway(world_cfg: dict, clips_cfg: dict, split: str, seed: int, c: in
 def true_distances(world_cfg: dict, clips_cfg: dict, split: str, seed: int, clip: int, track_ids) -> np.ndarray:
     """(len(track_ids), frames) true distance z (m, `near_faces`) of the given vehicles of clip ``clip`` (1-based,
     as the clip folders) in every frame: the motorway is rebuilt from the clip's seed, nothing is rendered. For
-    diagnostics only (benchmarks/bench_velocity_resolution.py --truth); no method sees it."""
+    diagnostics only (studies/velocity_resolution.py --truth); no method sees it."""
     mw, _ = clip_motorway(world_cfg, clips_cfg, split, seed, clip - 1)
     cam = clip_camera(world_cfg, clips_cfg)
     index = {int(t): k for k, t in enumerate(mw.cars["track_id"])}

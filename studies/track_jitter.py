@@ -9,7 +9,7 @@ std of the tracked log size around a quadratic in time. A car's true log size is
 Prints every real vehicle and, per band of last-frame box width, the world's vehicles (tracked without
 failure): count, median, min and max jitter, and how many lie at or below the real ones.
 
-    python benchmarks/bench_track_jitter.py --results results --split val --truth
+    python studies/track_jitter.py --results results --split val --truth
 """
 from __future__ import annotations
 
@@ -25,6 +25,7 @@ sys.path.insert(0, str(ROOT / "workflow"))
 
 from redsup import config as rconfig  # noqa: E402
 from redsup.prep.medianflow import write_medianflow  # noqa: E402
+from redsup.studies import write_study  # noqa: E402
 from redsup.velocity.diagnosis import scale_jitter  # noqa: E402
 from redsup.world.clips import true_distances  # noqa: E402
 
@@ -38,7 +39,9 @@ def main(argv=None) -> int:
     ap.add_argument("--bands", nargs="+", type=float, default=[10, 30, 50, 130, 400],
                     help="edges of the last-frame box width bands (px)")
     ap.add_argument("--truth", action="store_true", help="also the residual of the world's true -log Z")
+    ap.add_argument("--name", default="track_jitter", help="stored as results/studies/<name>.json")
     a = ap.parse_args(argv)
+    report = {"args": vars(a), "real": [], "world_bands": []}
     cfg = rconfig.load(a.config)
     mf = cfg["detection"]["medianflow"]
     real = Path(a.real)
@@ -51,6 +54,9 @@ def main(argv=None) -> int:
         r = np.load(npz)
         real_j = scale_jitter(r["boxes"])
         for k in range(len(real_j)):
+            report["real"].append({"clip": int(r["clip"][k]), "last_box_px": r["boxes"][k, -1, 2:4],
+                                   "distance_m": r["distance"][k], "jitter": real_j[k],
+                                   "failed_frames": int(r["failed"][k].sum())})
             print(f"real clip {int(r['clip'][k])}: last box {r['boxes'][k, -1, 2]:.0f} x {r['boxes'][k, -1, 3]:.0f} px, "
                   f"z {r['distance'][k]:.1f} m, jitter {real_j[k]:.4f}, failed frames {int(r['failed'][k].sum())}")
     w = np.load(Path(a.results) / "prepared/clips" / a.split / "medianflow.npz")
@@ -66,6 +72,8 @@ def main(argv=None) -> int:
         if not sel.any():
             continue
         j = jit[sel]
+        report["world_bands"].append({"width_px": [lo, hi], "vehicles": int(sel.sum()), "median": np.median(j),
+                                      "min": j.min(), "max": j.max(), "at_or_below_real": int((j <= ref).sum())})
         print(f"| {lo:.0f}-{hi:.0f} | {sel.sum()} | {np.median(j):.4f} | {j.min():.4f} | {j.max():.4f} | "
               f"{int((j <= ref).sum())} |")
     if a.truth:   # the true apparent size is 1 / Z: its jitter is the same measure on boxes of that size
@@ -78,6 +86,8 @@ def main(argv=None) -> int:
         res = scale_jitter(np.stack([np.zeros_like(size), np.zeros_like(size), size, size], axis=-1))
         print(f"\ntrue log size (-log Z) around its quadratic: median {np.median(res):.5f}, max {np.max(res):.5f} "
               f"over {len(res)} vehicles")
+        report["truth"] = {"vehicles": len(res), "median": np.median(res), "max": np.max(res)}
+    write_study(a.name, report)
     return 0
 
 

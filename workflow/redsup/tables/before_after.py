@@ -1,6 +1,6 @@
 """The scorecard under the old rules beside the current one, on one finished build's tables (issue 10).
 
-Usage: python docs/scorecard_before_after.py BUILD_DIR [OLD_COMMIT]
+Command line: python tools/scorecard_before_after.py BUILD_DIR [OLD_COMMIT] (or python -m redsup.tables.before_after)
 
 "Before" is the claims evaluator of OLD_COMMIT (default 52093ff, the last one before the three-way verdicts):
 a claim holds (✔) or fails (✘) on single numbers, ties win a `best` check, literature rows drop out of the
@@ -18,10 +18,9 @@ import sys
 import types
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "workflow"))
+from redsup.tables import registry
 
-from redsup.tables import registry  # noqa: E402
+ROOT = Path(__file__).resolve().parents[3]   # the checkout whose history holds OLD_COMMIT
 
 
 def old_evaluator(commit: str) -> types.ModuleType:
@@ -77,8 +76,14 @@ def report(before: dict, after: dict, commit: str) -> str:
     return head + "\n".join(rows)
 
 
-if __name__ == "__main__":
-    if len(sys.argv) < 2:
+def main(argv: list[str] | None = None) -> int:
+    argv = sys.argv[1:] if argv is None else argv
+    if not argv:
         sys.exit(__doc__)
-    commit = sys.argv[2] if len(sys.argv) > 2 else "52093ff"
-    print(report(*before_after(Path(sys.argv[1]), commit), commit))
+    commit = argv[1] if len(argv) > 1 else "52093ff"
+    print(report(*before_after(Path(argv[0]), commit), commit))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,8 +1,8 @@
 """In-box / in-mask LiDAR outlier fraction by distance, real KITTI object sample vs the embedded world
 (issue 11 §4; run by hand, not a test).
 
-    python benchmarks/bench_inmask_outliers.py                         # tiny-size world, 6 train scenes
-    python benchmarks/bench_inmask_outliers.py --scenes 12 --frames 4 --profile default --json out.json
+    python studies/inmask_outliers.py                         # tiny-size world, 6 train scenes
+    python studies/inmask_outliers.py --scenes 12 --frames 4 --profile default --name inmask_outliers_default
 
 For every ground-truth car: the LiDAR points projecting into its 2D box (and into its instance mask where the
 scene has one: the world's render; the KITTI sample has label boxes only) that lie outside its 3D box grown by
@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import copy
-import json
 import os
 import sys
 import tempfile
@@ -36,6 +35,7 @@ sys.path.insert(0, str(ROOT / "workflow"))
 from redsup import config  # noqa: E402
 from redsup.prep.detections import detect_scene  # noqa: E402
 from redsup.prep.outliers import adapted_records, by_distance, detection_records, scene_records  # noqa: E402
+from redsup.studies import write_study  # noqa: E402
 from redsup.world.generate import write_scene  # noqa: E402
 
 EDGES = (0.0, 20.0, 40.0, 80.0)
@@ -126,13 +126,13 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=5)
     ap.add_argument("--margin", type=float, default=None, help="3D box margin (default detection.points.gt_box_margin)")
     ap.add_argument("--realdata", default=os.environ.get("REDSUP_REALDATA", str(ROOT.parent / "shared" / "realdata")))
-    ap.add_argument("--json", default=None, help="also write the numbers here")
+    ap.add_argument("--name", default="inmask_outliers", help="stored as results/studies/<name>.json")
     ap.add_argument("--optimum", action="store_true", help="also the plain squared loss's own optimum (see above)")
     args = ap.parse_args(argv)
     cfg = config.load(ROOT / "config.yaml", {"profile": args.profile})
     margin = cfg["detection"]["points"]["gt_box_margin"] if args.margin is None else args.margin
     report = {"margin": margin, "edges": list(EDGES)}
-    with tempfile.TemporaryDirectory(prefix="bench_inmask_") as tmp:
+    with tempfile.TemporaryDirectory(prefix="inmask_outliers_") as tmp:
         tmp = Path(tmp)
         realdata = Path(args.realdata)
         if realdata.is_dir():
@@ -167,8 +167,7 @@ def main(argv=None) -> int:
         for recs in (gt, real if realdata.is_dir() else []):
             for r in recs:
                 r.pop("box_points", None), r.pop("mask_points", None), r.pop("box", None)
-    if args.json:
-        Path(args.json).write_text(json.dumps(report, indent=1))
+    write_study(args.name, {"args": vars(args), **report})
     return 0
 
 

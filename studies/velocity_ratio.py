@@ -1,7 +1,7 @@
 """MLP-tracker E_v against the constant predictor's in a finished build: the ratio and its paired,
 bin-stratified bootstrap over the vehicles (`redsup.velocity.compare`).
 
-    python benchmarks/velocity_ratio.py results/velocity [--split test val] [--a mlp_tracker] [--b constant]
+    python studies/velocity_ratio.py results/velocity [--split test val] [--a mlp_tracker] [--b constant]
         [--clips FIRST STOP]      # only the vehicles of clips FIRST <= clip < STOP
         [--b-dir OTHER/velocity]  # the reference from another build (a variant against the baseline, paired)
 """
@@ -13,6 +13,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "workflow"))
 
+from redsup.studies import write_study  # noqa: E402
 from redsup.velocity.compare import in_clips, per_vehicle_errors, ratio_bootstrap  # noqa: E402
 
 
@@ -27,7 +28,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--n", type=int, default=2000, help="bootstrap replicates")
     ap.add_argument("--clips", nargs=2, type=int, metavar=("FIRST", "STOP"),
                     help="only the vehicles of clips FIRST <= clip < STOP (e.g. the clips an enlarged split gained)")
+    ap.add_argument("--name", default="velocity_ratio", help="stored as results/studies/<name>.json")
     args = ap.parse_args(argv)
+    ratios = {}
     for split in args.split:
         try:
             a = per_vehicle_errors(args.velocity_dir, args.a, split)
@@ -45,6 +48,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{split}: {r['n']} vehicles, E_v {args.a} {r['ev_a']:.3f} / {args.b} {r['ev_b']:.3f} = "
               f"{r['ratio']:.3f} (95 % [{r['ratio_lo']:.3f}, {r['ratio_hi']:.3f}]); "
               f"{args.b} - {args.a} {r['diff']:.3f} [{r['diff_lo']:.3f}, {r['diff_hi']:.3f}]")
+        ratios[split] = r
+    write_study(args.name, {"args": vars(args), "ratios": ratios})
     return 0
 
 

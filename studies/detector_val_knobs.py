@@ -7,8 +7,8 @@ Trains one configuration of `lidar_detector.runs` on a finished build's cached t
 `lidar_detector_split` caches train and test). Prints AP_BEV at IoU 0.7 (R40) per difficulty, mean ± std over
 seeds, and the paired difference of each value to the first (same seeds).
 
-    python benchmarks/detector_val_knobs.py --results DIR/results --conf sic5_0_w2 --knob vote_recentre \
-        --values 0 1 --seeds 0 1 2 --json /tmp/detector_val_recentre.json
+    python studies/detector_val_knobs.py --results DIR/results --conf sic5_0_w2 --knob vote_recentre \
+        --values 0 1 --seeds 0 1 2 --name detector_val_recentre   # -> results/studies/detector_val_recentre.json
 """
 from __future__ import annotations
 
@@ -24,6 +24,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "workflow"))
 
 from redsup import config as rconfig  # noqa: E402
+from redsup.studies import write_study  # noqa: E402
 
 DIFFS = ("easy", "moderate", "hard")
 
@@ -59,7 +60,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2], help="seed indices (top-level seed + k)")
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--cache", default="/tmp/detector_val.npz")
-    ap.add_argument("--json", default=None)
+    ap.add_argument("--name", default="detector_val_knobs", help="stored as results/studies/<name>.json")
     args = ap.parse_args(argv)
     import torch
 
@@ -105,8 +106,7 @@ def main(argv=None) -> int:
                                                      for i in range(3))
               + ("" if value == args.values[0] else "   paired diff " + " / ".join(
                   f"{diff[:, i].mean():+.2f} [{diff[:, i].min():+.2f}, {diff[:, i].max():+.2f}]" for i in range(3))))
-    if args.json:
-        Path(args.json).write_text(json.dumps({"args": vars(args), "ap_bev": out}, indent=1))
+    write_study(args.name, {"args": vars(args), "ap_bev": out})
     return 0
 
 

@@ -19,7 +19,7 @@ its seed (nothing is rendered) and the vehicle's true box in every frame is the 
 
 Never reads the test split.
 
-    python benchmarks/velocity_oracle.py --results results
+    python studies/velocity_oracle.py --results results
 """
 from __future__ import annotations
 
@@ -35,6 +35,7 @@ sys.path.insert(0, str(ROOT / "workflow"))
 from redsup import config as rconfig  # noqa: E402
 from redsup.velocity.compare import ratio_bootstrap  # noqa: E402
 from redsup.velocity.data import TrackSet, load_split  # noqa: E402
+from redsup.velocity.diagnosis import hidden_fraction  # noqa: E402
 from redsup.velocity.experiment import run_constant, run_mlp  # noqa: E402
 from redsup.velocity.metrics import binned_error, squared_error  # noqa: E402
 from redsup.world.clips import clip_camera, clip_motorway  # noqa: E402
@@ -42,6 +43,7 @@ from redsup.world.common import rotate  # noqa: E402
 from redsup.world.motorway import motorway_state  # noqa: E402
 from redsup.world.prims import CAR_KINDS  # noqa: E402
 from redsup.world.sensors import box_corners  # noqa: E402
+from redsup.studies import write_study  # noqa: E402
 
 BINS = ("near", "medium", "far")
 
@@ -75,23 +77,6 @@ def clip_boxes(world_cfg: dict, clips_cfg: dict, split: str, seed: int, clip: in
         out[:, i] = np.stack([lo_u, lo_v, hi_u - lo_u, hi_v - lo_v], axis=1)
         depth[:, i] = np.bincount(ent, corners[..., 2].sum(1), V) / np.maximum(8 * np.bincount(ent, minlength=V), 1)
     return ids, out, depth
-
-
-def hidden_fraction(boxes: np.ndarray, depth: np.ndarray, rows) -> np.ndarray:
-    """(len(rows),) for each vehicle ``rows[j]`` the largest share, over the frames, of its box covered by the box
-    of one vehicle nearer to the camera (boxes (V, frames, 4) x, y, w, h; depth (V, frames)): a silhouette-box
-    proxy of partial occlusion during the clip."""
-    x0, y0 = boxes[..., 0], boxes[..., 1]
-    x1, y1 = x0 + boxes[..., 2], y0 + boxes[..., 3]
-    out = np.zeros(len(rows))
-    for j, r in enumerate(rows):
-        w = np.clip(np.minimum(x1[r], x1) - np.maximum(x0[r], x0), 0, None)
-        h = np.clip(np.minimum(y1[r], y1) - np.maximum(y0[r], y0), 0, None)
-        nearer = (depth > 0) & (depth < depth[r])
-        area = np.clip(boxes[r, :, 2] * boxes[r, :, 3], 1e-9, None)
-        share = np.where(nearer & (depth[r] > 0), w * h, 0.0) / area
-        out[j] = share.max()
-    return out
 
 
 def oracle_split(cfg: dict, split: str, tracks: TrackSet) -> tuple[TrackSet, np.ndarray]:
@@ -149,7 +134,6 @@ def per_bin(e: np.ndarray, bins: np.ndarray) -> str:
     return " / ".join(f"{e[bins == k].mean():.2f}" for k in range(3) if (bins == k).any())
 
 
-
 def main(argv=None) -> int:
     import torch
 
@@ -161,6 +145,7 @@ def main(argv=None) -> int:
     ap.add_argument("--walk", action="store_true", help="also the true boxes plus the measured random walk")
     ap.add_argument("--hidden", type=float, default=0.05,
                     help="share of a vehicle's box under a nearer vehicle's box that counts it partly hidden")
+    ap.add_argument("--name", default="velocity_oracle", help="stored as results/studies/<name>.json")
     a = ap.parse_args(argv)
     torch.set_num_threads(1)
     cfg = rconfig.load(a.config, {"profile": a.profile})
@@ -177,6 +162,7 @@ def main(argv=None) -> int:
                                                                  - log_size(oracle["val"].boxes[:, -1:]))
     change = log_size(oracle["val"].boxes[:, 0]) - log_size(oracle["val"].boxes[:, -1])
     step = np.zeros(3)
+    report = {"args": vars(a), "tracker_error": {}, "occlusion": {}, "variants": {}}
     print(f"tracker's log-size error against the truth (val, {int(ok.sum())} of {len(val)} vehicles tracked "
           "without failure), relative to the last frame:")
     for k, name in enumerate(BINS):
@@ -185,6 +171,9 @@ def main(argv=None) -> int:
             continue
         steps = np.diff(err[m], axis=1)
         step[k] = float(np.std(steps))
+        report["tracker_error"][name] = {"vehicles": int(m.sum()), "last_box_px": np.median(val.boxes[m, -1, 2]),
+                                         "drift_std": np.std(err[m, 0]), "step_std": step[k],
+                                         "true_change_std": np.std(change[m])}
         print(f"  {name}: {int(m.sum())} vehicles, last box {np.median(val.boxes[m, -1, 2]):.0f} px wide; drift "
               f"over the clip (std at the first frame) {np.std(err[m, 0]):.4f}, step std {step[k]:.4f} "
               f"(x sqrt(39) = {step[k] * np.sqrt(39):.4f}), lag-1 autocorrelation of steps "
@@ -207,6 +196,9 @@ def main(argv=None) -> int:
             resid = change[sel] + err[sel, 0] - (gain * change[sel] + offset)
             parts.append(f"{label} {int(sel.sum())}: drift {np.median(np.abs(err[sel, 0])):.4f}, gain {gain:.2f}, "
                          f"offset {offset:+.3f}, residual std {np.std(resid):.4f}")
+            report["occlusion"][f"{name}/{label}"] = {"vehicles": int(sel.sum()),
+                                                      "drift": np.median(np.abs(err[sel, 0])), "gain": gain,
+                                                      "offset": offset, "residual_std": np.std(resid)}
         print(f"  {name}: " + "; ".join(parts) + f" (the true change's std {np.std(change[m]):.4f})")
     _, const = run_constant(tracked["train"], {"val": val})
     e_const = squared_error(const["val"]["velocity"], val.velocity)
@@ -217,14 +209,19 @@ def main(argv=None) -> int:
                                                          with_walk(oracle["val"], step, rng))
     ev_const = binned_error(e_const, val.bins, "E_v")["E_v"]
     print(f"\nconstant predictor: val E_v {ev_const:.3f} (near / medium / far {per_bin(e_const, val.bins)})")
+    report["constant"] = {"E_v": ev_const, "per_bin": per_bin(e_const, val.bins)}
     for name, (tr, va) in variants.items():
         e = val_errors(cfg, tr, va, a.seeds)
         r = ratio_bootstrap(e, e_const, val.bins)
         print(f"{name}: val E_v {r['ev_a']:.3f} (near / medium / far {per_bin(e, val.bins)}), "
               f"{r['ratio']:.2f} x the constant [{r['ratio_lo']:.2f}, {r['ratio_hi']:.2f}]", flush=True)
+        report["variants"][name] = {**r, "per_bin": per_bin(e, val.bins),
+                                    "hidden_per_bin": per_bin(e[hidden], val.bins[hidden]),
+                                    "clear_per_bin": per_bin(e[~hidden], val.bins[~hidden])}
         for label, sel in (("hidden", hidden), ("clear", ~hidden)):
             print(f"    {label} ({int(sel.sum())} vehicles): near / medium / far {per_bin(e[sel], val.bins[sel])} "
                   f"against the constant's {per_bin(e_const[sel], val.bins[sel])}", flush=True)
+    write_study(a.name, report)
     return 0
 
 

@@ -12,12 +12,12 @@ vehicle in every frame (``redsup.world.clips.true_distances``, diagnostics only)
 change the tracker has to resolve, the tracker's error on it, and the E_v that estimating the clip's mean
 velocity costs when the relative velocity changes within the clip (``truth_diagnosis``).
 
-    python benchmarks/bench_velocity_resolution.py                          # 20 test clips, 320 / 640 / 1280
-    python benchmarks/bench_velocity_resolution.py --clips 40 --widths 320 --supersample 1 2 --split val
-    python benchmarks/bench_velocity_resolution.py --clips 40 --widths 320 640 --split val --truth
-    python benchmarks/bench_velocity_resolution.py --clips 20 --widths 1280 --split val --truth \
+    python studies/velocity_resolution.py                          # 20 test clips, 320 / 640 / 1280
+    python studies/velocity_resolution.py --clips 40 --widths 320 --supersample 1 2 --split val
+    python studies/velocity_resolution.py --clips 40 --widths 320 640 --split val --truth
+    python studies/velocity_resolution.py --clips 20 --widths 1280 --split val --truth \
         --foveate 1:0 4:48 4:48:32 --image-format png jpg      # foveated rendering (redsup.world.foveate), JPEG
-    python benchmarks/bench_velocity_resolution.py --clips 12 --widths 1280 --split val --truth --foveate 4:48 \
+    python studies/velocity_resolution.py --clips 12 --widths 1280 --split val --truth --foveate 4:48 \
         --image-format jpg png --pixel-noise 0.004 0                # sensor noise and JPEG against the size jitter
 
 ``--foveate F:M[:T]`` renders the cars' windows (grown by M px, then to the image's T-px tile grid) at full
@@ -41,6 +41,7 @@ sys.path.insert(0, str(ROOT / "workflow"))
 
 from redsup import config as rconfig  # noqa: E402
 from redsup.prep.medianflow import write_medianflow  # noqa: E402
+from redsup.studies import write_study  # noqa: E402
 from redsup.velocity.data import load_split  # noqa: E402
 from redsup.velocity.diagnosis import geometric_diagnosis, scale_jitter, truth_diagnosis  # noqa: E402
 from redsup.velocity.metrics import BIN_NAMES  # noqa: E402
@@ -77,7 +78,7 @@ def measure(cfg: dict, width: int, split: str, clips: int, workdir: Path, supers
         tracks = load_split(npz, out, cfg["velocity"]["min_box_px"])
         d = geometric_diagnosis(tracks, float(ccfg["fps"]))
         jitter = scale_jitter(tracks.boxes)
-        for b_i, b in enumerate(BIN_NAMES):   # the tracker's frame-to-frame size noise (benchmarks/bench_track_jitter.py)
+        for b_i, b in enumerate(BIN_NAMES):   # the tracker's frame-to-frame size noise (studies/track_jitter.py)
             ok = (tracks.bins == b_i) & ~tracks.tracker_failed & np.isfinite(jitter)
             if ok.any():
                 d[f"jitter_{b}"] = float(np.median(jitter[ok]))
@@ -122,6 +123,7 @@ def main(argv=None) -> None:
                    help="frame files (jpg at velocity_clips.jpeg_quality)")
     p.add_argument("--pixel-noise", nargs="+", type=float, default=[None],
                    help="world.pixel_noise values (sensor noise std, fraction of full scale); default: the config's")
+    p.add_argument("--name", default="velocity_resolution", help="stored as results/studies/<name>.json")
     args = p.parse_args(argv)
     foveates = [tuple(int(v) for v in f.split(":")) for f in args.foveate]
     cfg = rconfig.load(args.config)
@@ -160,6 +162,7 @@ def main(argv=None) -> None:
                   f"{r['track_scale']:g} | {r['tracker']} | "
                   f"{per_bin(r, 'ratio_signal', '.3f')} | {per_bin(r, 'ratio_noise', '.3f')} | "
                   f"{per_bin(r, 'accel_floor', '.2f')} |")
+    write_study(args.name, {"args": vars(args), "rows": [{"width": w, "supersample": k, **r} for w, k, r in rows]})
 
 
 if __name__ == "__main__":

@@ -7,7 +7,7 @@ The drills run the Snakefile beside this folder (or `--repo`), with `PYTHONPATH`
 otherwise win). Run them niced in a clean clone while other work edits the tree:
 
     git clone /work/main /tmp/drill && cd /tmp/drill
-    nice -n 10 /work/main/.venv/bin/python benchmarks/drill_kill_resume.py --base /tmp/drill_runs
+    nice -n 10 /work/main/.venv/bin/python drills/drill_kill_resume.py --base /tmp/drill_runs
 """
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Drill 1 (issue 14): kill -9 the tiny run at seeded random moments, rerun, and lose nothing.
 
     git clone /work/main /tmp/drill && cd /tmp/drill
-    nice -n 10 /work/main/.venv/bin/python benchmarks/drill_kill_resume.py --base /tmp/drill_runs [--seed 14]
+    nice -n 10 /work/main/.venv/bin/python drills/drill_kill_resume.py --base /tmp/drill_runs [--seed 14]
 
 1. `reference/`: the tiny profile (`snakemake all`) uninterrupted (or `--reference DIR`, a finished one).
 2. `killed/`: the same run, SIGKILLed with every process it started (Snakemake and all its jobs, frozen with

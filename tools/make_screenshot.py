@@ -1,6 +1,6 @@
 """The README's MLflow screenshot (docs/mlflow_ui.png) from a finished build, by hand:
 
-    python docs/make_screenshot.py BUILD_DIR [--table mccraith_ch7_table3] [--out docs/mlflow_ui.png]
+    python tools/make_screenshot.py BUILD_DIR [--table mccraith_ch7_table3] [--out docs/mlflow_ui.png]
 
 Copies BUILD_DIR/results/mlflow.db (the build is only read), serves it (`redsup.mlflow_ui`) and has headless Chromium photograph the table's parent run page (its child runs, duration,
 description with the tag filter).

@@ -19,9 +19,9 @@ Every variant trains ``--seeds`` MLPs (the configured recipe, epoch kept on val 
 squared velocity error is averaged over the seeds, and ``redsup.velocity.compare.ratio_bootstrap`` gives the
 variant's gain over the baseline with its paired, bin-stratified 95 % interval.
 
-    python benchmarks/velocity_val_knobs.py --results results --gates 0.05 0.03 --sigmas 3
-    python benchmarks/velocity_val_knobs.py --results results --features absolute relative_metric
-    python benchmarks/velocity_val_knobs.py --results results --train-clips /data/more/results/raw/clips/train
+    python studies/velocity_val_knobs.py --results results --gates 0.05 0.03 --sigmas 3
+    python studies/velocity_val_knobs.py --results results --features absolute relative_metric
+    python studies/velocity_val_knobs.py --results results --train-clips /data/more/results/raw/clips/train
 """
 from __future__ import annotations
 
@@ -38,6 +38,7 @@ sys.path.insert(0, str(ROOT / "workflow"))
 
 from redsup import config as rconfig  # noqa: E402
 from redsup.prep.medianflow import write_medianflow  # noqa: E402
+from redsup.studies import write_study  # noqa: E402
 from redsup.velocity.compare import ratio_bootstrap  # noqa: E402
 from redsup.velocity.data import load_split  # noqa: E402
 from redsup.velocity.experiment import run_mlp  # noqa: E402
@@ -87,6 +88,7 @@ def main(argv=None) -> int:
     ap.add_argument("--train-clips", nargs="*", default=[])
     ap.add_argument("--rendered", nargs=2, action="append", default=[], metavar=("TRAIN", "VAL"))
     ap.add_argument("--seeds", nargs="+", type=int, default=[0, 1, 2])
+    ap.add_argument("--name", default="velocity_val_knobs", help="stored as results/studies/<name>.json")
     a = ap.parse_args(argv)
     torch.set_num_threads(1)
     cfg = rconfig.load(a.config, {"profile": a.profile})
@@ -120,6 +122,10 @@ def main(argv=None) -> int:
     print(f"baseline (gate {gate0}, sigma 0, {len(base_train)} training vehicles): val E_v "
           f"{ratio_bootstrap(base, base, base_val.bins)['ev_a']:.3f} (near / medium / far {per_bin}) over "
           f"{len(base_val)} vehicles, seeds {seeds}", flush=True)
+    report = {"args": vars(a), "baseline": {"gate": gate0, "training_vehicles": len(base_train),
+                                            "val_vehicles": len(base_val), "per_bin": per_bin,
+                                            "E_v": ratio_bootstrap(base, base, base_val.bins)["ev_a"]},
+              "variants": {}}
     for name, (tr, va, s, features) in variants.items():
         if not np.array_equal(va.bins, base_val.bins):
             raise ValueError(f"{name}: the val vehicles differ from the baseline's")
@@ -128,6 +134,8 @@ def main(argv=None) -> int:
         per_bin = " / ".join(f"{e[base_val.bins == k].mean():.2f}" for k in range(3) if (base_val.bins == k).any())
         print(f"{name}: val E_v {r['ev_a']:.3f} (near / medium / far {per_bin}), gain over the baseline "
               f"{r['diff']:.3f} [{r['diff_lo']:.3f}, {r['diff_hi']:.3f}]", flush=True)
+        report["variants"][name] = {**r, "per_bin": per_bin}
+    write_study(a.name, report)
     return 0
 
 

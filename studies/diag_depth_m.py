@@ -14,13 +14,13 @@ some recipe knobs overridden from the command line, and records
   and depth agree on scale), correlation of |t_pred| with |t_true|, direction cosine, rotation angles.
 
 Usage (one training at a time; 1 thread):
-  nice -n 5 python benchmarks/diag_depth_m.py --results /work/def/results --tag base --seed-index 0
-  nice -n 5 python benchmarks/diag_depth_m.py --results /work/def/results --tag lr5e-4_wu50 --lr 5e-4 \
+  nice -n 5 python studies/diag_depth_m.py --results /work/def/results --tag base --seed-index 0
+  nice -n 5 python studies/diag_depth_m.py --results /work/def/results --tag lr5e-4_wu50 --lr 5e-4 \
       --warmup 50 --seed-index 1
-  python benchmarks/diag_depth_m.py --summarize          # table over /tmp/diag_m/*.json: recipe x seed
-  python benchmarks/diag_depth_m.py --oracle --results /work/def/results   # loss of the true geometry
-Outputs: /tmp/diag_m/<tag>_seed<k>.json (everything), /tmp/diag_m/<tag>_seed<k>_steps.csv (per step),
-/tmp/diag_m/<tag>_seed<k>_val.csv (per validation pass).
+  python studies/diag_depth_m.py --summarize          # table over results/studies/diag_depth_m/*.json: recipe x seed
+  python studies/diag_depth_m.py --oracle --results /work/def/results   # loss of the true geometry
+Outputs (--out, default results/studies/diag_depth_m): <tag>_seed<k>.json (everything), <tag>_seed<k>_steps.csv
+(per step), <tag>_seed<k>_val.csv (per validation pass); --oracle: oracle.json.
 """
 from __future__ import annotations
 
@@ -39,6 +39,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "workflow"))
 
 from redsup import config as rconfig  # noqa: E402
+from redsup.studies import STUDIES_ROOT, write_study  # noqa: E402
 
 
 def parse_args(argv=None):
@@ -51,7 +52,7 @@ def parse_args(argv=None):
     p.add_argument("--seed-index", type=int, default=0, help="the project's seed index k (model <ds>/M[/seed<k>])")
     p.add_argument("--seed", type=int, default=None, help="explicit seed (overrides --seed-index)")
     p.add_argument("--tag", default="base", help="recipe name (output file prefix)")
-    p.add_argument("--out", default="/tmp/diag_m")
+    p.add_argument("--out", default=f"{STUDIES_ROOT}/diag_depth_m")
     # recipe knobs (default: the resolved config's value)
     p.add_argument("--steps", type=int, default=None)
     p.add_argument("--batch", type=int, default=None)
@@ -325,7 +326,7 @@ def main(argv=None) -> int:
                "summary": {k: v for k, v in summary.items() if k != "validation"},
                "val": val_rows, "steps": step_rows, "argv": sys.argv}
     stem = out / f"{args.tag}_seed{args.seed_index}"
-    Path(f"{stem}.json").write_text(json.dumps(result, indent=1, default=float))
+    write_study(stem.name, result, out_dir=out)
     for rows, suffix in ((step_rows, "_steps.csv"), (val_rows, "_val.csv")):
         keys = list(dict.fromkeys(k for r in rows for k in r))
         with open(f"{stem}{suffix}", "w", newline="") as f:
@@ -432,7 +433,7 @@ def oracle(args) -> int:
     result = {k: float(np.mean(v)) for k, v in acc.items()}
     result["n_frames"] = len(acc.get("identity_error", []))
     print(json.dumps(result, indent=1))
-    Path(args.out, "oracle.json").write_text(json.dumps(result, indent=1))
+    write_study("oracle", result, out_dir=args.out)
     return 0
 
 

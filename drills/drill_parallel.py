@@ -2,7 +2,7 @@
 must write the same tables and the same MLflow runs as with `--cores 2`.
 
     git clone /work/main /tmp/drill && cd /tmp/drill
-    nice -n 10 /work/main/.venv/bin/python benchmarks/drill_parallel.py --base /tmp/drill_parallel \\
+    nice -n 10 /work/main/.venv/bin/python drills/drill_parallel.py --base /tmp/drill_parallel \\
         [--reference DIR] [--parallel DIR]
 
 `--reference DIR`: a finished `--cores 2` tiny working directory to compare against (e.g. drill 1's

@@ -13,7 +13,7 @@ the first frame over ``--trials`` sequences, for four ways of sampling the zoome
 - ``kxk``: k x k point samples a pixel on the image upsampled k times (cubic), averaged (the renderer's
   ``velocity_clips.foveate.car_rays_across``).
 
-    python benchmarks/bench_tracker_sampling.py --results results --split val
+    python studies/tracker_sampling.py --results results --split val
 """
 from __future__ import annotations
 
@@ -28,6 +28,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "workflow"))
 
 from redsup.prep.medianflow import bbox_xywh, read_annotations, track_backward  # noqa: E402
+from redsup.studies import write_study  # noqa: E402
 
 
 def zoom(img: np.ndarray, s: float, centre: tuple[float, float], shift: float, samples: int) -> np.ndarray:
@@ -91,6 +92,7 @@ def main(argv=None) -> int:
     ap.add_argument("--trials", type=int, default=12)
     ap.add_argument("--change", type=float, default=0.15, help="largest |log size change| over a sequence")
     ap.add_argument("--samples", nargs="+", type=int, default=[0, 1, 2, 4], help="0: interpolated, k: k x k points")
+    ap.add_argument("--name", default="tracker_sampling", help="stored as results/studies/<name>.json")
     a = ap.parse_args(argv)
     cases = []
     real = Path(a.real)
@@ -116,9 +118,11 @@ def main(argv=None) -> int:
     names = {0: "interpolated", 1: "point"}
     print("RMS error of the tracked log size at the first frame (40 frames, size change within "
           f"±{a.change:g}, {a.trials} sequences):")
+    rms = {}
     for name, img, box in cases:
-        row = ", ".join(f"{names.get(k, f'{k}x{k}')} {drift(img, box, k, a.trials, a.change):.4f}" for k in a.samples)
-        print(f"  {name}: {row}", flush=True)
+        rms[name] = {names.get(k, f"{k}x{k}"): drift(img, box, k, a.trials, a.change) for k in a.samples}
+        print(f"  {name}: " + ", ".join(f"{k} {v:.4f}" for k, v in rms[name].items()), flush=True)
+    write_study(a.name, {"args": vars(a), "rms_log_size_error": rms})
     return 0
 
 

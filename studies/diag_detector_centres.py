@@ -16,13 +16,12 @@ rules on KITTI-pixel box heights, as `redsup.lidar_detector.evaluate`):
 - with ``--realdata`` (default ../shared/realdata, skipped when absent): the same median-to-centre distance for
   the cars of the real KITTI object sample (LiDAR points inside the labelled 3D box).
 
-    python benchmarks/diag_detector_centres.py --results DIR/results --configs sic5_0_w2 sic5_0_w0 \
-        centerpoint_avg_size --optimum --json /tmp/diag_centres.json
+    python studies/diag_detector_centres.py --results DIR/results --configs sic5_0_w2 sic5_0_w0 \
+        centerpoint_avg_size --optimum      # -> results/studies/diag_detector_centres.json
 """
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import tempfile
@@ -36,7 +35,8 @@ sys.path.insert(0, str(ROOT / "workflow"))
 from redsup.det3d import boxes as B  # noqa: E402
 from redsup.det3d import kitti_eval  # noqa: E402
 from redsup.det3d.kitti_pixels import kitti_pixel_scale  # noqa: E402
-from redsup.prep.boxes3d import points_in_box  # noqa: E402
+from redsup.boxes3d import points_in_box  # noqa: E402
+from redsup.studies import write_study  # noqa: E402
 
 MEDIAN_BINS = (0.0, 0.4, 0.8, 1.2, 1.6, np.inf)
 
@@ -121,8 +121,8 @@ def sic_optimum(t, sets, template, alpha: float, beta: float) -> np.ndarray:
 def real_kitti(realdata: Path) -> list[dict]:
     """Cars of the real KITTI object sample: distance, points in the labelled 3D box, their median's distance
     from the box centre (and its radial part)."""
-    sys.path.insert(0, str(ROOT / "benchmarks"))
-    from bench_inmask_outliers import real_records
+    sys.path.insert(0, str(ROOT / "studies"))
+    from inmask_outliers import real_records
 
     with tempfile.TemporaryDirectory() as tmp:
         recs = real_records(realdata, Path(tmp), 0.0, keep_points=True)
@@ -152,7 +152,7 @@ def main(argv=None) -> int:
     ap.add_argument("--beta", type=float, default=0.0)
     ap.add_argument("--template-voxel", type=float, default=0.1)
     ap.add_argument("--realdata", default=os.environ.get("REDSUP_REALDATA", str(ROOT.parent / "shared" / "realdata")))
-    ap.add_argument("--json", default=None)
+    ap.add_argument("--name", default="diag_detector_centres", help="stored as results/studies/<name>.json")
     args = ap.parse_args(argv)
     res = Path(args.results) / "lidar_detector"
     t = dict(np.load(res / "data" / "test.npz", allow_pickle=False))
@@ -221,8 +221,7 @@ def main(argv=None) -> int:
                   f"centre (radial {r['radial']:+.2f})")
     else:
         print(f"(no real data at {realdata}: KITTI cars skipped)")
-    if args.json:
-        Path(args.json).write_text(json.dumps(report, indent=1))
+    write_study(args.name, {"args": vars(args), **report})
     return 0
 
 

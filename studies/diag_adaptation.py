@@ -13,16 +13,16 @@ loss, groups, learning rate, frames and median scaling), and records per evaluat
 - the ego speed at the frame (`data.ego_speed`; a static camera gives the monocular loss no parallax).
 
 Usage (after a default build in DIR):
-  python benchmarks/diag_adaptation.py --results DIR/results --model world_kitti/M --sources prev next \
-      --groups depth_encoder pose_encoder --lr 0.1 --checkpoints 0 5 10 25 50 --out /tmp/diag_adapt/M.json
-  python benchmarks/diag_adaptation.py --results DIR/results --model world_kitti/S --sources stereo \
-      --groups depth_encoder --lr 0.1 --checkpoints 0 5 10 25 50 --out /tmp/diag_adapt/S.json
-Prints a per-frame table and the means; writes everything as JSON.
+  python studies/diag_adaptation.py --results DIR/results --model world_kitti/M --sources prev next \
+      --groups depth_encoder pose_encoder --lr 0.1 --checkpoints 0 5 10 25 50 --name diag_adaptation/M
+  python studies/diag_adaptation.py --results DIR/results --model world_kitti/S --sources stereo \
+      --groups depth_encoder --lr 0.1 --checkpoints 0 5 10 25 50 --name diag_adaptation/S
+Prints a per-frame table and the means; writes everything to results/studies/<name>.json.
 
 ``--windows RUN BASELINE`` instead reads two finished `depth_eval` results (results/depth/eval/<name>.json, e.g.
 Fig. 4's sequential run and its baseline) and prints their per-frame Abs Rel averaged over windows of
 ``--window`` frames of each sequence beside the ego speed (nothing is recomputed):
-  python benchmarks/diag_adaptation.py --results DIR/results \
+  python studies/diag_adaptation.py --results DIR/results \
       --windows sequential_world_kitti-M_on_world_kitti-long_all_de-pe_lr0.01_s5 \
                 baseline_world_kitti-M_on_world_kitti-long_all_prev-next --window 25
 """
@@ -40,6 +40,7 @@ sys.path.insert(0, str(ROOT / "workflow"))
 
 from redsup import config as rconfig  # noqa: E402
 from redsup import sceneio  # noqa: E402
+from redsup.studies import write_study  # noqa: E402
 
 
 def parse_args(argv=None):
@@ -57,7 +58,8 @@ def parse_args(argv=None):
     p.add_argument("--checkpoints", type=int, nargs="+", default=[0, 5, 10, 25, 50])
     p.add_argument("--moving-speed", type=float, default=0.5, help="m/s: a car faster than this moves")
     p.add_argument("--threads", type=int, default=1)
-    p.add_argument("--out", default="/tmp/diag_adapt/run.json")
+    p.add_argument("--name", default=None, help="stored as results/studies/<name>.json (default: diag_adaptation, "
+                   "with --windows diag_adaptation_windows)")
     p.add_argument("--windows", nargs=2, metavar=("RUN", "BASELINE"), default=None,
                    help="compare two finished depth_eval results window by window (no recomputation)")
     p.add_argument("--window", type=int, default=25, help="frames per window of --windows")
@@ -134,6 +136,7 @@ def main(argv=None) -> int:
         for r in rows:
             print(f"{r['sequence']} frames {r['frames'][0]:4d}-{r['frames'][1]:4d} ({r['n']:3d}) ego {r['ego_speed']:5.1f} m/s"
                   f" | {args.windows[0]} {r['run']:.3f} | baseline {r['baseline']:.3f}")
+        write_study(args.name or "diag_adaptation_windows", {"args": vars(args), "windows": rows})
         return 0
     import torch
 
@@ -213,10 +216,7 @@ def main(argv=None) -> int:
               f"  parked car {m['abs_rel_parked_car']:.4f}  rest {m['abs_rel_rest']:.4f}")
     up = [r for r in rows if r["checkpoints"][str(n_steps)]["loss"] > r["checkpoints"]["0"]["loss"]]
     print(f"frames whose loss rose after {n_steps} steps: {len(up)} of {len(rows)}")
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"args": vars(args), "rows": rows, "means": means}, indent=1, default=float))
-    print("wrote", out)
+    write_study(args.name or "diag_adaptation", {"args": vars(args), "rows": rows, "means": means})
     return 0
 
 
