@@ -202,10 +202,10 @@ def test_provisional_record_names_its_attempt(tmp_path):
 
 
 def test_a_record_finishing_while_the_sync_reads_it_still_gets_its_artifacts(work, monkeypatch):
-    """The race a live sync meets: it reads a job's provisional record, the job ends (its process is gone, the
-    record is final) before the sync hashes it. Content and hash come from one read, so the next sync sees a
-    new record and attaches the final record's artifacts (a second read once gave the final hash to the
-    provisional content: FINISHED later, but without the figure)."""
+    """The race a live sync meets: it reads a job's provisional record and decides its status (the job runs),
+    then the job ends (its process is gone, the record is final) before the sync imports it. Content and hash
+    come from one read, so the next sync sees a new record and attaches the final record's artifacts (a second
+    read once gave the final hash to the provisional content: FINISHED later, but without the figure)."""
     gate = work["root"] / "go"
     proc = _job(work, "d", gate)
     real = tracking.table_memberships
@@ -221,7 +221,7 @@ def test_a_record_finishing_while_the_sync_reads_it_still_gets_its_artifacts(wor
     finally:
         proc.kill()
     [run] = _runs(work, "d")
-    assert run.info.status == "KILLED"  # provisional content, its process gone: what the sync could know then
+    assert run.info.status == "RUNNING"  # provisional content, its process alive when the sync looked
     monkeypatch.setattr(tracking, "table_memberships", real)
     work["sync"]()
     from mlflow.tracking import MlflowClient
@@ -229,6 +229,48 @@ def test_a_record_finishing_while_the_sync_reads_it_still_gets_its_artifacts(wor
     [run] = _runs(work, "d")
     assert run.info.status == "FINISHED"
     assert "out.txt" in {a.path for a in MlflowClient(work["uri"]).list_artifacts(run.info.run_id)}
+
+
+def test_a_job_that_ends_between_the_read_and_the_process_check_is_finished_not_killed(work, monkeypatch):
+    """The race that showed a finished job as KILLED: the sync reads the provisional record (RUNNING), the job
+    writes its final record and exits, then the sync checks the job's process and finds it gone. The record it
+    held is stale; the record on disk says FINISHED, and that is what the store gets, artifacts included."""
+    gate = work["root"] / "go"
+    proc = _job(work, "e", gate)
+    real = tracking._pid_alive
+    checked = []
+
+    def job_ends_first(pid):  # the process check, after the record was read
+        if not checked:
+            assert json.loads((work["runs"] / "e.json").read_text())["status"] == "RUNNING"  # what the sync read
+            gate.write_text("go")
+            assert proc.wait(60) == 0
+            assert json.loads((work["runs"] / "e.json").read_text())["status"] == "FINISHED"
+        checked.append(pid)
+        return real(pid)
+
+    monkeypatch.setattr(tracking, "_pid_alive", job_ends_first)
+    try:
+        work["sync"]()
+    finally:
+        proc.kill()
+    assert checked == [proc.pid]  # one check, on the provisional record; the fresh one is final (no check)
+    [run] = _runs(work, "e")
+    assert run.info.status == "FINISHED"
+    from mlflow.tracking import MlflowClient
+
+    assert "out.txt" in {a.path for a in MlflowClient(work["uri"]).list_artifacts(run.info.run_id)}
+    assert (work["sync"]()["updated"], len(_runs(work, "e"))) == (0, 1)  # up to date: the final record's hash
+
+
+def test_a_job_killed_between_the_read_and_the_process_check_is_killed(tmp_path):
+    """The fresh read only helps a job that wrote its final record: a provisional record of a dead process is
+    KILLED, read twice."""
+    path = tmp_path / "r.json"
+    dead = {"status": "RUNNING", "job": {"host": __import__("socket").gethostname(), "pid": 2 ** 22 + 12345}}
+    path.write_text(json.dumps(dead))
+    data, rid, status = tracking.read_current_record(path)
+    assert (data, status) == (dead, "KILLED") and rid == tracking.read_record(path)[1]
 
 
 def test_live_sync_leaves_the_cores_to_the_jobs():

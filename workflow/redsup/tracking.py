@@ -236,6 +236,19 @@ def record_status(data: Mapping[str, Any], final: bool = False) -> str:
     return "RUNNING"
 
 
+def read_current_record(path: str | Path, final: bool = False) -> tuple[dict, str, str]:
+    """A run record's content, hash and status (`record_status`), the status decided on the record as it is after
+    the process check. A job writes its final record and then exits: a provisional record read before that write
+    and checked after the exit would read KILLED although the job finished, so a provisional record whose
+    process is gone is read once more and the fresh content decides (a FINISHED record stays FINISHED)."""
+    data, rid = read_record(path)
+    status = record_status(data, final)
+    if status == "KILLED" and data["status"] == "RUNNING":
+        data, rid = read_record(path)
+        status = record_status(data, final)
+    return data, rid, status
+
+
 def _job_key(data: Mapping[str, Any], rid: str) -> str:
     return (data.get("job") or {}).get("uid") or rid
 
@@ -528,7 +541,7 @@ def sync_records(tracking_uri: str, plan: Mapping[str, Any], runs_root: str | Pa
     """Create experiments and parents (`init_store`) and bring the store up to the run records.
 
     One child run per job attempt (``job.uid`` of the record; older records: the record's hash): created when
-    first seen (RUNNING while the job runs, `record_status`), updated in place as the record changes, never
+    first seen (RUNNING while the job runs, `read_current_record`), updated in place as the record changes, never
     twice. A later attempt of the same job (same record path) replaces an interrupted one (RUNNING / KILLED in
     the store), which is deleted (MLflow's soft delete); a finished one is kept as history. Every child is
     tagged with the tables it serves (`table_memberships`; tags of superseded runs are removed) and carries
@@ -550,10 +563,11 @@ def _sync_records(tracking_uri, plan, runs_root: Path, out_json, *, artifact_roo
 
     records = []
     rids: dict[Path, str] = {}
+    statuses: dict[Path, str] = {}
     unreadable = []
     for path in find_records(runs_root):
         try:
-            data, rids[path] = read_record(path)
+            data, rids[path], statuses[path] = read_current_record(path, final)
             records.append((path, data))
         except (json.JSONDecodeError, UnicodeDecodeError, OSError) as exc:  # never half-written (.part + rename)
             unreadable.append(f"{path}: {exc}")
@@ -583,7 +597,7 @@ def _sync_records(tracking_uri, plan, runs_root: Path, out_json, *, artifact_roo
         except ValueError:
             rel = str(path)
         current[key] = rel
-        status = record_status(data, final)
+        status = statuses[path]
         want = _table_tags(memberships.get(path, set()))
         bench = benchmark_path(path, data["tags"].get("redsup.rule", ""), runs_root=runs_root,
                                benchmark_root=results_root / "benchmarks")
