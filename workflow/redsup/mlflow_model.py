@@ -7,6 +7,7 @@ mlflow once per sync, not once per job) and a logged model of the job's run. Imp
 """
 from __future__ import annotations
 
+import contextlib
 import copy
 import logging
 import os
@@ -26,6 +27,22 @@ from redsup.runlog import RunRecord, flatten_params, plain
 FORBIDDEN = "/:.%\"'"   # characters MLflow does not allow in a model name
 
 
+@contextlib.contextmanager
+def root_logging_kept():
+    """Undo what the block does to the root logger (handlers added, level changed). ``import mlflow.pytorch``
+    calls ``logging.basicConfig`` (its Lightning autolog module): a stderr handler on the root logger, through
+    which the Snakemake process, whose sync imports it, printed every log line a second time
+    (``INFO:snakemake.logging:...``)."""
+    root = logging.getLogger()
+    handlers, level = list(root.handlers), root.level
+    try:
+        yield
+    finally:
+        for handler in [h for h in root.handlers if h not in handlers]:
+            root.removeHandler(handler)
+        root.setLevel(level)
+
+
 def save_mlflow_model(module: nn.Module, folder: str | Path, kind: str, checkpoint_path: str | Path,
                       extra_files: list[str | Path] = (), metadata: Mapping[str, Any] | None = None) -> Path:
     """``module`` (the trained network of the ``kind`` checkpoint at ``checkpoint_path``) as an MLflow model
@@ -34,7 +51,8 @@ def save_mlflow_model(module: nn.Module, folder: str | Path, kind: str, checkpoi
     ``ModuleDict``), with ``extra_files`` (the resolved config) and explicit pip requirements (inferring them
     would load the model in a subprocess). Writes files only: no tracking store is opened."""
     os.environ.setdefault("MLFLOW_DISABLE_TELEMETRY", "true")
-    import mlflow.pytorch
+    with root_logging_kept():
+        import mlflow.pytorch
 
     folder = Path(folder)
     if folder.exists():

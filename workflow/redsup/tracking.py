@@ -73,9 +73,25 @@ def _prepare_local_store(tracking_uri: str) -> None:
             Path(path).parent.mkdir(parents=True, exist_ok=True)
 
 
+# MLflow's own switches for what it prints into the build's output: a "View run" / "View experiment" pair for
+# every run a sync ends on a tracking server, and a progress bar for every file it copies (a logged model's
+# config). Set unless the user set them.
+QUIET_MLFLOW_ENV = {"MLFLOW_SUPPRESS_PRINTING_URL_TO_STDOUT": "true", "MLFLOW_ENABLE_ARTIFACTS_PROGRESS_BAR": "false"}
+
+
+def quiet_mlflow(environ=None) -> dict:
+    """Set `QUIET_MLFLOW_ENV` in ``environ`` (default ``os.environ``) where the user has not set them; MLflow reads
+    them whenever it prints. Returns the values in force."""
+    environ = os.environ if environ is None else environ
+    for key, value in QUIET_MLFLOW_ENV.items():
+        environ.setdefault(key, value)
+    return {key: environ[key] for key in QUIET_MLFLOW_ENV}
+
+
 def _client(tracking_uri: str):
     from mlflow.tracking import MlflowClient
 
+    quiet_mlflow()
     _prepare_local_store(tracking_uri)
     return MlflowClient(tracking_uri=tracking_uri)
 
