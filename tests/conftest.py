@@ -34,3 +34,21 @@ def tiny(request):
     """The session's tiny build, or a finished one named by $REDSUP_TINY_BUILD (read only)."""
     path = os.environ.get("REDSUP_TINY_BUILD")
     return Path(path) if path else request.getfixturevalue("built")
+
+
+_COVERAGE_ROWS: list = []
+
+
+@pytest.fixture(scope="session")
+def coverage_report():
+    """Rows of measured interval coverage (tests/test_coverage.py), printed at the end of the run."""
+    return _COVERAGE_ROWS
+
+
+def pytest_terminal_summary(terminalreporter):
+    if _COVERAGE_ROWS:
+        from redsup.tables.coverage import markdown
+        from tests.test_coverage import SIMS
+
+        terminalreporter.write_sep("-", "coverage of the tables' 95 % intervals (simulated, redsup.tables.coverage)")
+        terminalreporter.write_line(markdown(_COVERAGE_ROWS, SIMS))

@@ -12,6 +12,14 @@ from redsup.tables import (evaluate_claims, kendall_tau, load_registry, paper_ta
                            write_scorecard, write_table)
 from redsup.tables.claims import _tau_b
 
+
+def _tight(ours: pd.DataFrame, spread: float = 1e-4) -> dict:
+    """Seed records of 3 seeds, v -+ spread, for every numeric cell (a table measured with little noise: claims are
+    decided on their intervals, and a cell without a record decides nothing)."""
+    df = ours.set_index(ours.columns[0]) if not pd.api.types.is_numeric_dtype(ours.iloc[:, 0]) else ours
+    return {str(r): {str(c): tables.noise.seeds([v - spread, v, v + spread]) for c, v in df.loc[r].items()
+                     if isinstance(v, (int, float)) and not pd.isna(v)} for r in df.index}
+
 PROMISED = (
     ["data_summary", "mccraith_ch3_table1", "mccraith_ch3_table2", "mccraith_ch3_fig3", "mccraith_ch3_fig6",
      "mccraith_ch3_synthetic_ablation"]
@@ -136,7 +144,8 @@ def ours_ch4_table2():
 
 def test_write_table_places_paper_beside_ours(tmp_path, ours_ch4_table2):
     md, csv, tex = tmp_path / "t.md", tmp_path / "t.csv", tmp_path / "t.tex"
-    score = write_table("mccraith_ch4_table2", ours_ch4_table2, md, csv, tex, note="profile tiny")
+    score = write_table("mccraith_ch4_table2", ours_ch4_table2, md, csv, tex, note="profile tiny",
+                        noise=_tight(ours_ch4_table2))
 
     df = pd.read_csv(csv, dtype=str, keep_default_na=False).set_index("row")
     assert {"Abs Rel (ours)", "Abs Rel (paper)", "δ < 1.25 (ours)", "δ < 1.25 (paper)", "RMSE (paper)",
@@ -150,7 +159,7 @@ def test_write_table_places_paper_beside_ours(tmp_path, ours_ch4_table2):
 
     text = md.read_text()
     assert text.startswith("# Instance adaptation learning rate")
-    assert "| 10^-1 | 0.100 | 0.097 |" in text  # ours at the paper's precision, paper as printed
+    assert "| 10^-1 | 0.100 ± 0.000 | 0.097 |" in text  # ours at the paper's precision, paper as printed
     assert "| 10^-5 | — | 0.115 |" in text
     assert "profile tiny" in text
     assert "Kendall τ" in text and "(n = 3 rows)" in text
@@ -159,19 +168,24 @@ def test_write_table_places_paper_beside_ours(tmp_path, ours_ch4_table2):
 
     latex = tex.read_text()
     assert "\\begin{tabular}" in latex and "\\caption{" in latex and "\\label{tab:mccraith_ch4_table2}" in latex
-    assert "10\\textsuperscript{-1} & 0.100 & 0.097" in latex
+    assert "10\\textsuperscript{-1} & 0.100 ± 0.000 & 0.097" in latex
     assert "$\\delta$ $<$ 1.25 (ours)" in latex
 
     saved = json.loads((tmp_path / "mccraith_ch4_table2.score.json").read_text())
     assert saved == json.loads(json.dumps(score, ensure_ascii=False, default=str))
     assert saved["kendall_tau"] == pytest.approx(1.0) and saved["n_rows"] == 3
     assert saved["claims_total"] == 3
-    assert saved["counts"] == {"reproduces": 2, "inconclusive": 1, "contradicted": 0, "not_testable": 0,
-                               "data_description": 0}
+    assert saved["counts"] == {"reproduces": 2, "inconclusive": 1, "thesis_effect_ruled_out": 0, "contradicted": 0,
+                               "not_testable": 0, "data_description": 0}
+    margin = saved["claims"][0]["margins"][0]  # the decided comparison, for the power report
+    assert margin["verdict"] == "reproduces" and margin["seeds"] == 3 and margin["clusters"] is None
+    # the thesis' effect on our scale: 10^-1 0.097 vs its closest row as a relative margin, times ours
+    assert margin["thesis_effect"] is not None and margin["thesis_effect"] > 0
 
 
 def test_claims_hold_and_fail(ours_ch4_table2):
-    good = {c["text"]: c for c in evaluate_claims("mccraith_ch4_table2", ours_ch4_table2)}
+    good = {c["text"]: c for c in evaluate_claims("mccraith_ch4_table2", ours_ch4_table2,
+                                                  noise=_tight(ours_ch4_table2))}
     best = good["Learning rate 0.1 gives the most significant improvement"]
     assert best["verdict"] == "reproduces" and "10^-1 0.1003" in best["evidence"]
     diverge = good["Too high a learning rate results in quick divergence"]
@@ -180,7 +194,7 @@ def test_claims_hold_and_fail(ours_ch4_table2):
     bad = ours_ch4_table2.copy()
     bad.loc[bad["row"] == "0.1", "abs_rel"] = 0.15  # worse than the baseline: 0.1 no longer best
     bad.loc[bad["row"] == "10", "abs_rel"] = 0.11  # high LR now better than the baseline
-    res = {c["text"]: c for c in evaluate_claims("mccraith_ch4_table2", bad)}
+    res = {c["text"]: c for c in evaluate_claims("mccraith_ch4_table2", bad, noise=_tight(bad))}
     assert res["Learning rate 0.1 gives the most significant improvement"]["verdict"] == "contradicted"
     assert "closest 10 0.11" in res["Learning rate 0.1 gives the most significant improvement"]["evidence"]
     assert res["Too high a learning rate results in quick divergence"]["verdict"] == "contradicted"
@@ -202,7 +216,8 @@ def test_check_types_and_extra_claims():
                                     "worse": {"row": "(b) 2D Mask", "metric": "AP_BEV Moderate"}}},
         {"text": "pre-evaluated", "verdict": "contradicted", "evidence": "computed by the caller"},
     ]
-    res = {c["text"]: c["verdict"] for c in evaluate_claims("mccraith_ch6_table1", ours, extra_claims=extra)}
+    res = {c["text"]: c["verdict"] for c in evaluate_claims("mccraith_ch6_table1", ours, extra_claims=extra,
+                                                            noise=_tight(ours.reset_index()))}
     R, I, C = "reproduces", "inconclusive", "contradicted"
     assert res == {
         "Masking LiDAR points with the 2D mask is a substantial improvement over the 2D box": I,  # no (a)
@@ -220,18 +235,20 @@ def test_table_without_paper_values_and_scorecard(tmp_path, ours_ch4_table2):
     assert s1["kendall_tau"] is None and s1["claims"] == [] and not s1["has_paper"]
     assert "| dataset | frames | cameras |" in (tmp_path / "d.md").read_text()
     assert pd.read_csv(tmp_path / "d.csv").columns.tolist() == ["dataset", "frames", "cameras"]
-    write_table("mccraith_ch4_table2", ours_ch4_table2, tmp_path / "t.md", tmp_path / "t.csv", tmp_path / "t.tex")
+    write_table("mccraith_ch4_table2", ours_ch4_table2, tmp_path / "t.md", tmp_path / "t.csv", tmp_path / "t.tex",
+                noise=_tight(ours_ch4_table2))
 
     out = tmp_path / "scorecard.md"
     result = write_scorecard([tmp_path / "mccraith_ch4_table2.score.json", tmp_path / "data_summary.score.json"], out)
     text = out.read_text()
     assert result["tables"] == 2
-    assert result["counts"] == {"reproduces": 2, "inconclusive": 1, "contradicted": 0, "not_testable": 0,
-                                "data_description": 0}
-    assert "| mccraith_ch4_table2 | depth | Abs Rel | +1.000 (3) | 2 | 1 | 0 | 0 | 0 |" in text
-    assert "| data_summary | data | — | n/a (0) | 0 | 0 | 0 | 0 | 0 |" in text
-    assert "| depth | 2 | 1 | 0 | 0 | 0 |" in text  # per stage
-    assert "**Total: 2 reproduces, 1 inconclusive, 0 contradicted, 0 not testable, 0 data description**" in text
+    assert result["counts"] == {"reproduces": 2, "inconclusive": 1, "thesis_effect_ruled_out": 0, "contradicted": 0,
+                                "not_testable": 0, "data_description": 0}
+    assert "| mccraith_ch4_table2 | depth | Abs Rel | +1.000 (3) | 2 | 1 | 0 | 0 | 0 | 0 |" in text
+    assert "| data_summary | data | — | n/a (0) | 0 | 0 | 0 | 0 | 0 | 0 |" in text
+    assert "| depth | 2 | 1 | 0 | 0 | 0 | 0 |" in text  # per stage
+    assert ("**Total: 2 reproduces, 1 inconclusive, 0 thesis effect ruled out, 0 contradicted, 0 not testable, "
+            "0 data description**") in text
     assert text.index("data_summary |") < text.index("mccraith_ch4_table2 |")  # registry order
     assert "Not built: mccraith_ch3_table1" in text
     assert "- ✔ **reproduces**: Learning rate 0.1 gives the most significant improvement" in text
@@ -284,12 +301,12 @@ def test_listed_claims_say_whether_they_hold_on_our_data(tmp_path):
     The scorecard lists the ones that do not hold."""
     far_heavy = pd.DataFrame({"Near": [114.0, 30.0], "Medium": [247.0, 61.0], "Far": [345.0, 109.0],
                               "Total": [706.0, 200.0]}, index=["Train", "Test"])
-    res = {c["text"][:6]: c for c in evaluate_claims("mccraith_ch3_table1", far_heavy)}
+    res = {c["text"][:6]: c for c in evaluate_claims("mccraith_ch3_table1", far_heavy, noise=_tight(far_heavy))}
     medium, sizes = res["Medium"], res["The tr"]
     assert medium["verdict"] == sizes["verdict"] == "data description"
     assert (medium["on_our_data"], sizes["on_our_data"]) == ("does not hold on our data", "holds on our data")
     write_table("mccraith_ch3_table1", far_heavy.reset_index(names="split"), tmp_path / "t.md", tmp_path / "t.csv",
-                tmp_path / "t.tex")
+                tmp_path / "t.tex", noise=_tight(far_heavy))
     result = write_scorecard([tmp_path / "mccraith_ch3_table1.score.json"], tmp_path / "scorecard.md")
     assert result["counts"]["data_description"] == 2 and result["counts"]["contradicted"] == 0
     assert result["listed_not_holding"] == [("mccraith_ch3_table1", medium["text"])]
@@ -299,29 +316,35 @@ def test_listed_claims_say_whether_they_hold_on_our_data(tmp_path):
     assert "the split sizes are configuration (velocity_clips.splits); holds on our data (measured:" \
         in sizes["evidence"]
     medium_heavy = far_heavy.assign(Medium=[400.0, 150.0])
-    res = {c["text"][:6]: c for c in evaluate_claims("mccraith_ch3_table1", medium_heavy)}
+    res = {c["text"][:6]: c for c in evaluate_claims("mccraith_ch3_table1", medium_heavy,
+                                                     noise=_tight(medium_heavy))}
     assert "; holds on our data (measured:" in res["Medium"]["evidence"]
     no_check = [{"text": "listed without checks", "category": "not_testable", "reason": "a visual statement"},
                 {"text": "not testable, checked", "category": "not_testable", "reason": "about prior work",
                  "check": {"type": "order", "better": "Train", "worse": "Test", "metric": "Total"}}]
-    c, d = evaluate_claims("mccraith_ch3_table1", far_heavy, extra_claims=no_check)[-2:]
+    c, d = evaluate_claims("mccraith_ch3_table1", far_heavy, extra_claims=no_check, noise=_tight(far_heavy))[-2:]
     assert c["verdict"] == "not testable" and c["evidence"] == "a visual statement (measured: not machine-checked)"
     assert d["verdict"] == "not testable" and "on_our_data" not in d    # its checks cannot decide it
     assert d["evidence"].startswith("about prior work (measured: Total: Train 706 > Test 200")
 
 
 def test_identical_cells_without_spread_do_not_show_closeness():
-    """Two rows both at 0 AP with no spread (a floor: nothing detected) are not evidence that they are
-    close; 60.0 vs 60.5 or 60.0 vs 60.0 as single values inside the tolerance are."""
+    """Two rows both at 0 AP with no spread over seeds (a floor: nothing detected) are not evidence that they
+    are close; 60.0 vs 60.5 or 60.0 vs 60.0 measured with little noise inside the tolerance are; without noise
+    records nothing is decided."""
     rows = ["(b) 2D Mask", "(c) 2D Mask, multi-view"]
     claim = [{"text": "close", "check": {"type": "close", "a": rows[1], "b": rows[0], "tol": 1.0}}]
     floor = pd.DataFrame({"AP_BEV Moderate": [0.0, 0.0]}, index=rows)
-    c = evaluate_claims("mccraith_ch6_table1", floor, extra_claims=claim)[-1]
+    c = evaluate_claims("mccraith_ch6_table1", floor, extra_claims=claim, noise=_tight(floor, 0.0))[-1]
     assert c["verdict"] == "inconclusive" and "equivalence not shown" in c["evidence"]
     near = pd.DataFrame({"AP_BEV Moderate": [60.0, 60.5]}, index=rows)
-    assert evaluate_claims("mccraith_ch6_table1", near, extra_claims=claim)[-1]["verdict"] == "reproduces"
+    assert evaluate_claims("mccraith_ch6_table1", near, extra_claims=claim,
+                           noise=_tight(near))[-1]["verdict"] == "reproduces"
     same = pd.DataFrame({"AP_BEV Moderate": [60.0, 60.0]}, index=rows)
-    assert evaluate_claims("mccraith_ch6_table1", same, extra_claims=claim)[-1]["verdict"] == "reproduces"
+    assert evaluate_claims("mccraith_ch6_table1", same, extra_claims=claim,
+                           noise=_tight(same))[-1]["verdict"] == "reproduces"
+    bare = evaluate_claims("mccraith_ch6_table1", near, extra_claims=claim)[-1]
+    assert bare["verdict"] == "inconclusive" and "without a noise record" in bare["evidence"]
 
 
 def test_tie_is_inconclusive_not_a_win():
@@ -352,19 +375,21 @@ def test_best_needs_every_row_of_its_pool():
 
 
 def test_seed_noise_decides_the_verdict():
-    """0.439 vs 0.437 over 3 seeds with std ~0.02 is inside the noise; 0.30 vs 0.44 is not."""
+    """0.439 vs 0.437 over 3 seeds with std ~0.02 is inside the noise, and the interval excludes the thesis' own
+    effect (whole network 0.207 vs baseline 0.115 in its table: +80 %, on our baseline 0.35): that effect is ruled
+    out here; 0.30 vs 0.44 is beyond the noise."""
     ours = pd.DataFrame({"Abs Rel": [0.437, 0.439]},
                         index=["baseline [9] (no instance adaptation)", "whole network"])
     noise = {"baseline [9] (no instance adaptation)": {"Abs Rel": tables.noise.seeds([0.417, 0.437, 0.457])},
              "whole network": {"Abs Rel": tables.noise.seeds([0.419, 0.439, 0.459])}}
     text = "Updating all network parameters at inference makes accuracy significantly worse than the baseline"
     c = {x["text"]: x for x in evaluate_claims("mccraith_ch4_table1", ours, noise=noise)}[text]
-    assert c["verdict"] == "inconclusive" and "seeds (unpaired)" in c["evidence"]
-    # by hand: difference 0.002, se = sqrt(2 * 0.02^2 / 3) = 0.01633, Welch df = 4 -> t = 2.776
+    assert c["verdict"] == "thesis effect ruled out" and "seeds" in c["evidence"]
+    # by hand: difference 0.002, se = sqrt(2 * 0.02^2 / 3) = 0.01633, Welch df = 4 -> t = 2.7764
     lo, hi, _ = tables.noise.difference_interval(0.439, 0.437, noise["whole network"]["Abs Rel"],
                                                  noise["baseline [9] (no instance adaptation)"]["Abs Rel"])
-    assert lo == pytest.approx(0.002 - 2.776 * 0.016330, abs=1e-5)
-    assert hi == pytest.approx(0.002 + 2.776 * 0.016330, abs=1e-5)
+    assert lo == pytest.approx(0.002 - 2.7764 * 0.016330, abs=1e-5)
+    assert hi == pytest.approx(0.002 + 2.7764 * 0.016330, abs=1e-5)
     ours2 = ours.copy()
     ours2.loc["whole network", "Abs Rel"] = 0.60
     noise["whole network"]["Abs Rel"] = tables.noise.seeds([0.58, 0.60, 0.62])
@@ -380,18 +405,19 @@ def test_seed_noise_decides_the_verdict():
 
 def test_paired_bootstrap_sees_a_consistent_small_gain():
     """A gain of 0.01 on every frame is certain under a paired bootstrap, although the per-frame spread
-    (0.1 .. 0.5) is far larger than the gain; shuffled (unpaired) it would be inside the noise."""
+    (0.1 .. 0.5) is far larger than the gain; shuffled (unpaired) it would be inside the noise. Frame ids without a
+    scene: each frame is a cluster of its own."""
     frames = [f"f{i:02d}" for i in range(40)]
     base = {f: 0.1 + 0.4 * i / 39 for i, f in enumerate(frames)}
     adapted = {f: v - 0.01 for f, v in base.items()}
     nb, na = tables.noise.bootstrap(base), tables.noise.bootstrap(adapted)
     assert nb["units"] == na["units"]
     lo, hi, how = tables.noise.difference_interval(sum(adapted.values()) / 40, sum(base.values()) / 40, na, nb)
-    assert how == "paired bootstrap" and lo == pytest.approx(-0.01) and hi == pytest.approx(-0.01)
+    assert how == "paired cluster bootstrap, 40 clusters" and lo == pytest.approx(-0.01) and hi == pytest.approx(-0.01)
     other = tables.noise.bootstrap({f"g{i}": v for i, v in enumerate(adapted.values())})  # other units
     lo2, hi2, how2 = tables.noise.difference_interval(sum(adapted.values()) / 40, sum(base.values()) / 40,
                                                       other, nb)
-    assert "unpaired" in how2 and lo2 < 0 < hi2
+    assert how2 == "cluster bootstrap" and lo2 < 0 < hi2
 
 
 def test_bootstrap_statistic_and_spread_display(tmp_path):
@@ -407,20 +433,21 @@ def test_bootstrap_statistic_and_spread_display(tmp_path):
     assert df.at["10^-1", "Abs Rel (ours) std"] == pytest.approx(0.01)
 
 
-def test_too_few_units_and_float_ties_are_inconclusive():
-    one = tables.noise.bootstrap({"f0": 0.40})
-    other = tables.noise.bootstrap({"f0": 0.39})
-    lo, hi, how = tables.noise.difference_interval(0.39, 0.40, other, one)
-    assert math.isnan(lo) and "fewer than 3 units" in how
-    assert tables.noise.verdict_of_interval(*tables.noise.difference_interval(0.3992, 0.3992 + 1e-12)[:2]) \
-        == "inconclusive"
+def test_too_few_clusters_and_float_ties_are_inconclusive():
+    one = tables.noise.bootstrap({f"scene{g}/{f}": 0.40 + 0.01 * f for g in range(4) for f in range(5)})
+    other = tables.noise.bootstrap({f"scene{g}/{f}": 0.39 + 0.01 * f for g in range(4) for f in range(5)})
+    lo, hi, how = tables.noise.difference_interval(0.41, 0.42, other, one)  # 20 frames, but from 4 scenes
+    assert math.isnan(lo) and "4 clusters (fewer than 5)" in how
+    tight = tables.noise.seeds([0.3992, 0.3992, 0.3992])
+    assert tables.noise.verdict_of_interval(*tables.noise.difference_interval(0.3992, 0.3992 + 1e-12, tight,
+                                                                              tight)[:2]) == "inconclusive"
 
 
 def test_seed_records_of_the_same_models_pair_seed_by_seed():
     """Adapted 0.142 / 0.129 / 0.137 vs baseline 0.164 / 0.142 / 0.150 (ch. 4 Table 5's MS rows, 3 seeds): per-seed
-    differences -0.022 / -0.013 / -0.013, mean -0.016, sd 0.0051962; half width t(2) 4.303 x 0.0051962 / sqrt(3)
-    = 0.012910, so [-0.028910, -0.003090]: the gain is beyond the noise when paired. Unpaired (Welch: variances
-    43e-6 and 124e-6, of the means 55.67e-6, df 3.24 -> t 3.182) the same numbers give -0.016 -+ 0.023741
+    differences -0.022 / -0.013 / -0.013, mean -0.016, sd 0.0051962; half width t(2) 4.302653 x 0.0051962 / sqrt(3)
+    = 0.012908, so [-0.028908, -0.003092]: the gain is beyond the noise when paired. Unpaired (Welch: variances
+    43e-6 and 124e-6, of the means 55.67e-6, df 3.238 -> t 3.0540) the same numbers give -0.016 -+ 0.022786
     (inconclusive), and so do records of different models."""
     a, b = [0.142, 0.129, 0.137], [0.164, 0.142, 0.150]
     ma, mb = sum(a) / 3, sum(b) / 3
@@ -428,15 +455,15 @@ def test_seed_records_of_the_same_models_pair_seed_by_seed():
     assert na["pair"] == "world_kitti/MS" and "pair" not in tables.noise.seeds(a)
     lo, hi, how = tables.noise.difference_interval(ma, mb, na, nb)
     assert how == "paired seeds"
-    assert lo == pytest.approx(-0.016 - 0.012910, abs=2e-6) and hi == pytest.approx(-0.016 + 0.012910, abs=2e-6)
+    assert lo == pytest.approx(-0.016 - 0.012908, abs=2e-6) and hi == pytest.approx(-0.016 + 0.012908, abs=2e-6)
     assert tables.noise.verdict_of_interval(-hi, -lo) == "reproduces"  # lower is better: margin b - a > 0
     for other in (tables.noise.seeds(b, "world_kitti/M"), tables.noise.seeds(b)):
         lo2, hi2, how2 = tables.noise.difference_interval(ma, mb, na, other)
-        assert how2 == "seeds (unpaired)" and lo2 < 0 < hi2
-        assert lo2 == pytest.approx(-0.016 - 0.023741, abs=2e-6) and hi2 == pytest.approx(-0.016 + 0.023741, abs=2e-6)
+        assert how2 == "seeds" and lo2 < 0 < hi2
+        assert lo2 == pytest.approx(-0.016 - 0.022786, abs=2e-6) and hi2 == pytest.approx(-0.016 + 0.022786, abs=2e-6)
     # a different number of seeds cannot pair
     _, _, how3 = tables.noise.difference_interval(ma, mb, na, tables.noise.seeds(b[:2], "world_kitti/MS"))
-    assert how3 == "seeds (unpaired)"
+    assert how3 == "seeds"
 
 
 def _boot(values, units="u10", n_units=10):
@@ -445,16 +472,17 @@ def _boot(values, units="u10", n_units=10):
 
 def test_seed_means_carry_their_test_sampling_noise():
     """Three seeds evaluated on the same test units: the seed spread says nothing about which units those are.
-    By hand, B = 4 replicates. (1) Every seed lowers the error by exactly 0.03 (seed variance 0), but the seed
-    means' replicates differ by 0 / 0.1 / 0.2 / 0.3 (variance 0.0166667): seeds alone give the point -0.03
-    (reproduces), with the sampling noise -0.03 -+ 1.96 x 0.129099 = 0.253034 (inconclusive). (2) Per-seed
-    differences -0.02 / -0.01 / -0.03 (variance of the mean 1e-4 / 3, df 2) and replicate differences
-    -0.005 / 0.005 / -0.005 / 0.005 (variance 1e-4 / 3): Welch-Satterthwaite over both, total 6.6667e-5 at df
-    (2v)^2 / (v^2 / 2) = 8, t 2.306, would give 0.018828, narrower than the seeds' own 4.303 x 0.0057735 = 0.024845:
-    the half width is the larger, so the interval stays the seeds' [-0.044845, 0.004845]. (3) Per-seed differences
-    -0.020 / -0.021 / -0.019 (variance of the mean 3.3333e-7) and replicate differences -0.01 / 0.01 / -0.01 / 0.01
-    (1.3333e-4): total 1.33667e-4, df 321600 -> 1.96, half width 1.96 x 0.0115614 = 0.022660, against the seeds'
-    4.303 x 5.7735e-4 = 0.002484 alone: the sampling noise decides (inconclusive instead of reproduces)."""
+    By hand, B = 4 replicates over 10 units, each its own cluster (G = 10): the sampling variance is the replicates'
+    variance x 10 / 9 at 9 df (t 2.262157). (1) Every seed lowers the error by exactly 0.03 (seed variance 0), but
+    the seed means' replicates differ by 0 / 0.1 / 0.2 / 0.3 (variance 0.0166667, x 10 / 9 = 0.0185185): seeds
+    alone give the point -0.03, with the sampling noise -0.03 -+ 2.262157 x 0.136083 = 0.307841 (inconclusive).
+    (2) Per-seed differences -0.02 / -0.01 / -0.03 (variance of the mean 1e-4 / 3, df 2) and replicate differences
+    -0.005 / 0.005 / -0.005 / 0.005 (3.7037e-5 at df 9): Welch-Satterthwaite over both would give 2.366 x 0.0083887
+    = 0.019846, narrower than the seeds' own 4.302653 x 0.0057735 = 0.024841: the half width is the larger, so the
+    interval stays the seeds' [-0.044841, 0.004841]. (3) Per-seed differences -0.020 / -0.021 / -0.019 (variance of
+    the mean 3.3333e-7) and replicate differences -0.01 / 0.01 / -0.01 / 0.01 (1.48148e-4): total 1.48481e-4 at
+    df 9.04, half width 0.027546, against the seeds' 4.302653 x 5.7735e-4 = 0.002484 alone: the sampling noise
+    decides (inconclusive instead of reproduces)."""
     noise = tables.noise
     a1, b1 = [0.10, 0.12, 0.14], [0.13, 0.15, 0.17]
     ra = noise.with_sampling(noise.seeds(a1, "m"), [_boot([0.1, 0.2, 0.3, 0.4])] * 3)
@@ -463,21 +491,21 @@ def test_seed_means_carry_their_test_sampling_noise():
     lo0, hi0, how0 = noise.difference_interval(0.12, 0.15, noise.seeds(a1, "m"), noise.seeds(b1, "m"))
     assert how0 == "paired seeds" and lo0 == pytest.approx(-0.03) and hi0 == pytest.approx(-0.03)
     lo, hi, how = noise.difference_interval(0.12, 0.15, ra, rb)
-    assert how == "paired seeds + paired test bootstrap"
-    assert lo == pytest.approx(-0.03 - 0.253034, abs=1e-6) and hi == pytest.approx(-0.03 + 0.253034, abs=1e-6)
+    assert how == "paired seeds + paired cluster bootstrap, 10 clusters"
+    assert lo == pytest.approx(-0.03 - 0.307841, abs=1e-6) and hi == pytest.approx(-0.03 + 0.307841, abs=1e-6)
     assert noise.verdict_of_interval(-hi, -lo) == "inconclusive"
     a2, b2 = [0.10, 0.12, 0.14], [0.12, 0.13, 0.17]
     ra2 = noise.with_sampling(noise.seeds(a2, "m"), [_boot([0.0, 0.01, 0.0, 0.01])] * 3)
     rb2 = noise.with_sampling(noise.seeds(b2, "m"), [_boot([0.005, 0.005, 0.005, 0.005])] * 3)
     lo2, hi2, _ = noise.difference_interval(0.12, 0.14, ra2, rb2)
-    assert lo2 == pytest.approx(-0.044845, abs=2e-6) and hi2 == pytest.approx(0.004845, abs=2e-6)
+    assert lo2 == pytest.approx(-0.044841, abs=2e-6) and hi2 == pytest.approx(0.004841, abs=2e-6)
     lo2s, hi2s, _ = noise.difference_interval(0.12, 0.14, noise.seeds(a2, "m"), noise.seeds(b2, "m"))
     assert (lo2s, hi2s) == pytest.approx((lo2, hi2))
     a5, b5 = [0.100, 0.120, 0.140], [0.120, 0.141, 0.159]
     ra5 = noise.with_sampling(noise.seeds(a5, "m"), [_boot([0.0, 0.02, 0.0, 0.02])] * 3)
     rb5 = noise.with_sampling(noise.seeds(b5, "m"), [_boot([0.01] * 4)] * 3)
     lo5, hi5, _ = noise.difference_interval(0.12, 0.14, ra5, rb5)
-    assert lo5 == pytest.approx(-0.02 - 0.022660, abs=2e-6) and hi5 == pytest.approx(-0.02 + 0.022660, abs=2e-6)
+    assert lo5 == pytest.approx(-0.02 - 0.027546, abs=2e-6) and hi5 == pytest.approx(-0.02 + 0.027546, abs=2e-6)
     lo5s, hi5s, _ = noise.difference_interval(0.12, 0.14, noise.seeds(a5, "m"), noise.seeds(b5, "m"))
     assert hi5s == pytest.approx(-0.02 + 0.002484, abs=2e-6)
     assert noise.verdict_of_interval(-hi5s, -lo5s) == "reproduces" and noise.verdict_of_interval(-hi5, -lo5) == \
@@ -485,17 +513,17 @@ def test_seed_means_carry_their_test_sampling_noise():
     # replicates over other units do not pair: their variances add
     rb3 = noise.with_sampling(noise.seeds(b2, "m"), [_boot([0.005, 0.015, 0.005, 0.015], units="other")] * 3)
     _, _, how3 = noise.difference_interval(0.12, 0.14, ra2, rb3)
-    assert how3 == "paired seeds + test bootstrap (unpaired)"
+    assert how3 == "paired seeds + cluster bootstrap"
     # the seeds' replicates must share their units (else the record keeps its seeds only)
     mixed = noise.with_sampling(noise.seeds(a2), [_boot([0, 1, 0, 1]), _boot([0, 1, 0, 1], units="v"),
                                                   _boot([0, 1, 0, 1])])
     assert "boot" not in mixed
     few = noise.with_sampling(noise.seeds(a2), [_boot([0, 1, 0, 1], n_units=2)] * 3)  # 2 units measure nothing:
-    assert "boot" not in few                                                     # the seeds' interval stays
+    assert math.isnan(noise.difference_interval(0.12, 0.0, few, noise.seeds(b2))[0])  # no verdict on them
     # a one-seed row's bootstrap record against a seed mean with replicates on the same units pairs its replicates
     lo4, hi4, how4 = noise.difference_interval(0.12, 0.14, ra2, _boot([0.005, 0.005, 0.005, 0.005]))
-    assert how4 == "seeds + paired test bootstrap"
+    assert how4 == "seeds + paired cluster bootstrap, 10 clusters"
     # by hand: seeds 0.10 / 0.12 / 0.14, variance of the mean 4e-4 / 3 (df 2); replicate differences -0.005 / 0.005
-    # / -0.005 / 0.005 (variance 3.3333e-5); total 1.6667e-4 at df 3.125 (t 3.182): 0.041079, below the seeds' own
-    # 4.303 x 0.0115470 = 0.049687, which is the half width
-    assert lo4 == pytest.approx(-0.02 - 0.049687, abs=2e-6) and hi4 == pytest.approx(-0.02 + 0.049687, abs=2e-6)
+    # / -0.005 / 0.005 (variance 3.7037e-5 at df 9); the total's interval is below the seeds' own
+    # 4.302653 x 0.0115470 = 0.049683, which is the half width
+    assert lo4 == pytest.approx(-0.02 - 0.049683, abs=2e-6) and hi4 == pytest.approx(-0.02 + 0.049683, abs=2e-6)

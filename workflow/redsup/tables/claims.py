@@ -24,8 +24,10 @@ from redsup.tables.registry import (CHECK_TYPES, align, as_frame, column_key, lo
                                     paper_directions, paper_table, paper_values, row_key, table_info)
 
 REPRODUCES, INCONCLUSIVE, CONTRADICTED = "reproduces", "inconclusive", "contradicted"
+RULED_OUT = "thesis effect ruled out"  # the interval holds 0 but excludes the thesis-sized effect: well powered
 NOT_TESTABLE, DATA_DESCRIPTION = "not testable", "data description"
-VERDICTS = (REPRODUCES, INCONCLUSIVE, CONTRADICTED, NOT_TESTABLE, DATA_DESCRIPTION)
+VERDICTS = (REPRODUCES, INCONCLUSIVE, RULED_OUT, CONTRADICTED, NOT_TESTABLE, DATA_DESCRIPTION)
+COUNTED = (REPRODUCES, INCONCLUSIVE, RULED_OUT, CONTRADICTED)
 CATEGORIES = {"not_testable": NOT_TESTABLE, "data_description": DATA_DESCRIPTION}
 
 
@@ -84,7 +86,7 @@ class _Cells:
     """Numeric lookup in one table with lenient row / column matching, with each cell's noise record."""
 
     def __init__(self, table: pd.DataFrame, directions: Mapping[str, bool], noise: Mapping | None = None,
-                 literature: Sequence[str] = ()):
+                 literature: Sequence[str] = (), exact: bool = False):
         self.table = numeric(table)
         self.rows = {row_key(r): r for r in self.table.index}
         self.cols = {column_key(c): c for c in self.table.columns}
@@ -92,6 +94,7 @@ class _Cells:
         self.noise = {(row_key(r), column_key(c)): rec for r, cols in (noise or {}).items()
                       for c, rec in cols.items() if rec}
         self.literature = {row_key(r) for r in literature}
+        self.exact = exact  # printed numbers taken as they are (the thesis' own table), not measurements
 
     def get(self, row, metric) -> float | None:
         r, c = self.rows.get(row_key(row)), self.cols.get(column_key(metric))
@@ -101,6 +104,8 @@ class _Cells:
         return None if pd.isna(v) else float(v)
 
     def noise_of(self, row, metric) -> dict | None:
+        if self.exact:
+            return noise_lib.EXACT
         return self.noise.get((row_key(row), column_key(metric)))
 
     def is_literature(self, row) -> bool:
@@ -157,31 +162,73 @@ def _ival(lo: float, hi: float) -> str:
     return f"[{_fmt(lo)}, {_fmt(hi)}]"
 
 
-def _beats(cells: _Cells, a: tuple[str, str, float], b: tuple[str, str, float], lower: bool):
-    """(verdict, interval text) of 'a beats b': the 95 % interval of the margin by which it does."""
+def thesis_effect(paper: "_Cells | None", better: tuple[str, str], worse: tuple[str, str], lower: bool,
+                  ours_worse: float) -> float | None:
+    """The thesis' effect on our scale: its relative margin of ``better`` over ``worse`` (e.g. 0.115 -> 0.089 is
+    23 %) times our value of ``worse``; None when the thesis has no such margin (a cell missing, or no gain)."""
+    if paper is None:
+        return None
+    pb, pw = paper.get(*better), paper.get(*worse)
+    if pb is None or pw is None or pw == 0 or not math.isfinite(ours_worse):
+        return None
+    rel = (pw - pb) / abs(pw) if lower else (pb - pw) / abs(pw)
+    return rel * abs(ours_worse) if rel > 0 else None
+
+
+def _beats(cells: _Cells, a: tuple[str, str, float], b: tuple[str, str, float], lower: bool,
+           paper: "_Cells | None" = None, min_effect: float | None = None) -> dict:
+    """'a beats b': the verdict on the 95 % interval [lo, hi] of the margin by which it does, with the thesis'
+    effect on our scale (``thesis_effect``). An interval around 0 that excludes the thesis-sized effect is
+    RULED_OUT; with ``min_effect`` (a fraction of the thesis' effect: "substantially") the margin must exceed that
+    floor to reproduce, and an interval wholly below it contradicts the claim."""
     (ar, am, av), (br, bm, bv) = a, b
-    lo, hi, how = noise_lib.difference_interval(av, bv, cells.noise_of(ar, am), cells.noise_of(br, bm))
+    na, nb = cells.noise_of(ar, am), cells.noise_of(br, bm)
+    lo, hi, how = noise_lib.difference_interval(av, bv, na, nb)
     if lower:  # margin = b - a
         lo, hi = -hi, -lo
-    verdict = noise_lib.verdict_of_interval(lo, hi) or INCONCLUSIVE
-    return verdict, lo, hi, how
+    effect = thesis_effect(paper, (ar, am), (br, bm), lower, bv)
+    floor = min_effect * effect if min_effect is not None and effect is not None else 0.0
+    verdict = noise_lib.verdict_of_interval(lo - floor, hi - floor) or INCONCLUSIVE
+    if verdict == INCONCLUSIVE and effect is not None and lo <= 0 <= hi and hi < effect:
+        verdict = RULED_OUT
+    if min_effect is not None and effect is None and verdict == REPRODUCES:
+        verdict = INCONCLUSIVE  # a minimum effect the thesis' own table cannot size: not decided
+    return {"verdict": verdict, "lo": lo, "hi": hi, "how": how, "margin": (bv - av) if lower else (av - bv),
+            "thesis_effect": effect, "floor": floor if min_effect is not None else None,
+            **_sample_size(na, nb)}
+
+
+def _sample_size(*records) -> dict:
+    """Test clusters and seeds behind a margin (the smallest of its two cells)."""
+    clusters = [int(r.get("n_clusters", r.get("n_units", 0))) for r in records
+                if r and (r["kind"] == "bootstrap" or r.get("boot") is not None)]
+    seeds = [len(r["values"]) for r in records if r and r["kind"] == "seeds"]
+    return {"clusters": min(clusters) if clusters else None, "seeds": min(seeds) if seeds else None}
+
+
+def _margin_text(m: dict) -> str:
+    extra = f"; thesis' effect here {_fmt(m['thesis_effect'])}" if m["thesis_effect"] is not None else ""
+    if m.get("floor") is not None:
+        extra += f"; minimum effect {_fmt(m['floor'])}"
+    return f"margin 95 % {_ival(m['lo'], m['hi'])}, {m['how']}{extra}"
 
 
 def _value_interval(cells: _Cells, row: str, metric: str, v: float) -> tuple[float, float]:
-    rec = cells.noise_of(row, metric)
-    if not rec:
-        return v, v
-    lo, hi, _ = noise_lib.difference_interval(v, 0.0, rec, None)
+    lo, hi, _ = noise_lib.value_interval(v, cells.noise_of(row, metric))
     return lo, hi
 
 
-def evaluate_check(check: Mapping, cells: _Cells, headline: str | None) -> tuple[str, str]:
-    """(verdict, evidence) of one check on one table: reproduces / inconclusive / contradicted, or not
-    testable when it needs a literature row that has no value of ours."""
+def evaluate_check(check: Mapping, cells: _Cells, headline: str | None,
+                   paper: _Cells | None = None) -> tuple[str, str, list[dict]]:
+    """(verdict, evidence, margins) of one check on one table: reproduces / inconclusive / contradicted /
+    thesis-sized effect ruled out (``paper``: the thesis' own table, which sizes its effect), or not testable when
+    it needs a literature row that has no value of ours. ``margins``: the decided comparisons (``_beats``)."""
     kind = check.get("type")
     if kind not in CHECK_TYPES:
         raise ValueError(f"unknown check type {kind!r} (known: {CHECK_TYPES})")
+    min_effect = check.get("min_effect")
     results: list[tuple[str, str]] = []
+    margins: list[dict] = []
     for metric in _metrics(check, headline):
         prefix = "" if metric is None else f"{metric}: "
         lit = [r for r in _rows_of(check, metric) if cells.is_literature(r)]
@@ -200,10 +247,11 @@ def evaluate_check(check: Mapping, cells: _Cells, headline: str | None) -> tuple
                 missing = [x for x, v in ((label, b), (wlabel, w)) if v is None]
                 results.append((INCONCLUSIVE, f"{prefix}missing {', '.join(missing)}"))
                 continue
-            verdict, lo, hi, how = _beats(cells, (br, bm, b), (wr, wm, w), lower)
+            m = _beats(cells, (br, bm, b), (wr, wm, w), lower, paper, min_effect)
+            margins.append({"comparison": f"{label} vs {wlabel}", **m})
             rel = "<" if b < w else ">" if b > w else "="
-            results.append((verdict, f"{prefix}{label} {_fmt(b)} {rel} {wlabel} {_fmt(w)} "
-                                     f"({'lower' if lower else 'higher'} is better; margin 95 % {_ival(lo, hi)}, {how})"))
+            results.append((m["verdict"], f"{prefix}{label} {_fmt(b)} {rel} {wlabel} {_fmt(w)} "
+                                          f"({'lower' if lower else 'higher'} is better; {_margin_text(m)})"))
         elif kind == "best":
             row, worst = check["row"], bool(check.get("worst", False))
             lower = cells.lower_is_better(metric, check) != worst  # the "winning" direction
@@ -225,19 +273,14 @@ def evaluate_check(check: Mapping, cells: _Cells, headline: str | None) -> tuple
                 why = f"missing {', '.join(absent)}" if absent else "no other row to compare"
                 results.append((INCONCLUSIVE, f"{metric}: {row} {_fmt(v)}; {why}"))
                 continue
-            verdicts = {r: _beats(cells, (row, metric, v), (r, metric, cells.get(r, metric)), lower)
-                        for r in others}
-            if all(x[0] == REPRODUCES for x in verdicts.values()):
-                verdict = REPRODUCES
-            elif any(x[0] == CONTRADICTED for x in verdicts.values()):
-                verdict = CONTRADICTED
-            else:
-                verdict = INCONCLUSIVE
-            closest = min(verdicts, key=lambda r: verdicts[r][1])  # the smallest lower margin bound
-            _, lo, hi, how = verdicts[closest]
+            verdicts = {r: _beats(cells, (row, metric, v), (r, metric, cells.get(r, metric)), lower, paper,
+                                  min_effect) for r in others}
+            verdict, _ = _combine([(x["verdict"], "") for x in verdicts.values()])
+            closest = min(verdicts, key=lambda r: (math.inf if math.isnan(verdicts[r]["lo"]) else verdicts[r]["lo"]))
+            m = verdicts[closest]  # the smallest lower margin bound
+            margins.append({"comparison": f"{row} vs {closest}", **m})
             results.append((verdict, f"{metric}: {row} {_fmt(v)}; {word} of {len(pool)} rows; closest "
-                                     f"{closest} {_fmt(cells.get(closest, metric))} (margin 95 % "
-                                     f"{_ival(lo, hi)}, {how})"))
+                                     f"{closest} {_fmt(cells.get(closest, metric))} ({_margin_text(m)})"))
         elif kind == "close":
             a, b = cells.get(check["a"], metric), cells.get(check["b"], metric)
             if a is None or b is None:
@@ -275,7 +318,8 @@ def evaluate_check(check: Mapping, cells: _Cells, headline: str | None) -> tuple
             bounds = " and ".join(x for x in [f"≥ {lo_b}" if "min" in check else "",
                                                f"≤ {hi_b}" if "max" in check else ""] if x)
             results.append((verdict, f"{metric}: {check['row']} {_fmt(v)} (95 % {_ival(lo, hi)}) vs {bounds}"))
-    return _combine(results)
+    verdict, evidence = _combine(results)
+    return verdict, evidence, margins
 
 
 def _combine(results: list[tuple[str, str]]) -> tuple[str, str]:
@@ -284,6 +328,8 @@ def _combine(results: list[tuple[str, str]]) -> tuple[str, str]:
         verdict = NOT_TESTABLE
     elif any(v == CONTRADICTED for v in verdicts):
         verdict = CONTRADICTED
+    elif any(v == RULED_OUT for v in verdicts):
+        verdict = RULED_OUT
     elif verdicts and all(v == REPRODUCES for v in verdicts):
         verdict = REPRODUCES
     else:
@@ -294,11 +340,14 @@ def _combine(results: list[tuple[str, str]]) -> tuple[str, str]:
 # a data description's own checks still say whether its statement is true of our data
 DOES_NOT_HOLD = "does not hold on our data"
 _ON_OUR_DATA = {REPRODUCES: "holds on our data", CONTRADICTED: DOES_NOT_HOLD,
+                RULED_OUT: "undecided on our data (no effect of the thesis' size)",
                 INCONCLUSIVE: "undecided on our data (inside the noise or a cell missing)"}
 
 
-def _evaluate(claims, table: pd.DataFrame, directions, headline, noise=None, literature=()) -> list[dict]:
-    cells = _Cells(table, directions, noise, literature)
+def _evaluate(claims, table: pd.DataFrame, directions, headline, noise=None, literature=(),
+              paper: pd.DataFrame | None = None, exact: bool = False) -> list[dict]:
+    cells = _Cells(table, directions, noise, literature, exact=exact)
+    paper_cells = cells if exact else (_Cells(paper, directions) if paper is not None and not paper.empty else None)
     out = []
     for claim in claims:
         base = {"text": claim["text"], "note": claim.get("note", "")}
@@ -312,8 +361,10 @@ def _evaluate(claims, table: pd.DataFrame, directions, headline, noise=None, lit
             continue
         check = claim.get("check")
         checks = (check if isinstance(check, list) else [check]) if check else []
-        verdict, evidence = _combine([evaluate_check(c, cells, headline) for c in checks]) if checks else \
+        decided = [evaluate_check(c, cells, headline, paper_cells) for c in checks]
+        verdict, evidence = _combine([(v, e) for v, e, _ in decided]) if checks else \
             (INCONCLUSIVE, "not machine-checked")
+        margins = [_plain_margin(m) for _, _, ms in decided for m in ms]
         if category:
             held = _ON_OUR_DATA.get(verdict) if checks and category == "data_description" else None
             verdict = CATEGORIES[category]
@@ -324,8 +375,13 @@ def _evaluate(claims, table: pd.DataFrame, directions, headline, noise=None, lit
             verdict = NOT_TESTABLE
             evidence = f"the thesis' own table disagrees with its text: {claim['paper_inconsistent']} " \
                        f"(measured: {evidence})"
-        out.append({**base, "verdict": verdict, "evidence": evidence})
+        out.append({**base, "verdict": verdict, "evidence": evidence, **({"margins": margins} if margins else {})})
     return out
+
+
+def _plain_margin(m: Mapping) -> dict:
+    """A decided comparison as JSON-able numbers (None for NaN): what the power report reads."""
+    return {k: (None if isinstance(v, float) and math.isnan(v) else v) for k, v in m.items()}
 
 
 def _literature_rows(table_id: str) -> list[str]:
@@ -347,7 +403,7 @@ def evaluate_claims(table_id: str, ours, extra_claims=None, registry: dict | Non
     paper = paper_table(table_id)
     ours = align(as_frame(ours), paper)
     return _evaluate(claims, ours, paper_directions(table_id), info.get("headline_metric"),
-                     align_noise(noise, paper), _literature_rows(table_id))
+                     align_noise(noise, paper), _literature_rows(table_id), paper)
 
 
 def align_noise(noise: Mapping | None, paper: pd.DataFrame) -> dict:
@@ -359,8 +415,8 @@ def align_noise(noise: Mapping | None, paper: pd.DataFrame) -> dict:
 
 
 def evaluate_claims_on_paper(table_id: str, registry: dict | None = None) -> list[dict]:
-    """The same claims decided on the paper's own numbers (a transcription / consistency check; no noise,
-    so a tie is inconclusive)."""
+    """The same claims decided on the paper's own numbers, taken as exact (a transcription / consistency check; a
+    tie is inconclusive)."""
     info = table_info(table_id, registry or load_registry())
     paper = paper_table(table_id)
     if paper.empty:
@@ -368,7 +424,7 @@ def evaluate_claims_on_paper(table_id: str, registry: dict | None = None) -> lis
                 for c in info.get("claims") or []]
     claims = [{k: v for k, v in c.items() if k not in ("category", "paper_inconsistent")}
               for c in info.get("claims") or []]
-    return _evaluate(claims, paper, paper_directions(table_id), info.get("headline_metric"))
+    return _evaluate(claims, paper, paper_directions(table_id), info.get("headline_metric"), exact=True)
 
 
 def count_verdicts(claims: Sequence[Mapping]) -> dict[str, int]:

@@ -6,61 +6,43 @@ A cell of ours may carry a ``Noise`` record (JSON-able dict):
   seeds; the cell's value is their mean, its spread their standard deviation. With ``"pair": KEY`` the k-th
   value comes from the k-th trained model named by KEY (e.g. a depth model's seeds): two rows read from the same
   trained models (a baseline and its adaptation, Manydepth and its own teacher) are paired seed by seed.
-- ``{"kind": "bootstrap", "values": [r_1, ..., r_B], "units": DIGEST}``: the metric recomputed on B
-  resamples (with replacement) of the evaluation units (frames, objects, tracks). The resample indices are
-  a function of the sorted unit ids only (``resample_indices``), so two rows evaluated on the same units
-  (same ``units`` digest) share their resamples and their replicate differences form a *paired* bootstrap.
-
+- ``{"kind": "bootstrap", "values": [r_1, ..., r_B], "units": DIGEST, "n_units": N, "n_clusters": G}``: the
+  metric recomputed on B cluster-bootstrap resamples of the evaluation units (frames nested in scenes, vehicles in
+  clips: ``redsup.stats``). The resamples are a function of the sorted unit ids only, so two rows evaluated on
+  the same units (same ``units`` digest) share them and their replicate differences form a *paired* bootstrap.
 - A seed record may also carry the test-sampling noise of its mean (``with_sampling``): ``"boot"``, the B
-  bootstrap replicates of the seed mean (replicate r = the mean over the seeds of each seed's r-th replicate,
-  which resample the same units, since the resample indices depend on the unit ids only), with their
-  ``"units"`` digest. The seeds all evaluate on the same test units, so their spread says nothing about which
-  units those are; ``boot`` does.
+  bootstrap replicates of the seed mean (replicate r = the mean over the seeds of each seed's r-th replicate),
+  with their ``"units"`` digest and cluster count. The seeds all evaluate on the same test units, so their spread
+  says nothing about which units those are; ``boot`` does.
 
-``difference_interval(a, b)`` is the 95 % interval of ``a - b``: paired bootstrap quantiles when both are
-bootstrap records on the same units; a paired t interval of the per-seed differences when both are seed
-records of the same trained models (same ``pair``); otherwise a Welch-style normal / t interval from the two
-variances (seed std² / n, bootstrap variance). When a seed record carries ``boot``, the interval adds the
-test-sampling variance to the seed variance (paired over the units where both sides have them on the same
-units), a two-way (seed x test unit) random-effects reading, with Welch-Satterthwaite degrees of freedom (the
-bootstrap part a large sample) and a half width never narrower than the seed part's or the bootstrap part's
-own: adding the sampling noise never narrows an interval.
-Without any noise record the interval is the point difference.
+``difference_interval(a, b)`` is the 95 % interval of ``a - b``: the variance of the difference is the sum of a
+seed part (paired seed by seed when both rows read the same trained models, ``pair``; else each row's seed
+variance / n) and a test-sampling part (the variance of the cluster-bootstrap replicates, of their paired
+differences where both rows share their units, times G / (G - 1)); a Student-t quantile with Welch-Satterthwaite
+degrees of freedom (seeds - 1, clusters - 1 per part), the half width never narrower than any part's own.
+Percentile intervals are not used: over few clusters they cover well below 95 %
+(``redsup.tables.coverage`` measures each path). There is no verdict (NaN) for a cell without a noise record,
+or with test-sampling noise over fewer than ``MIN_CLUSTERS`` clusters.
 """
 from __future__ import annotations
 
-import hashlib
 import math
 from collections.abc import Callable, Mapping, Sequence
 
 import numpy as np
 
+from redsup.stats import (LEVEL, MIN_CLUSTERS, n_clusters, resample_sets, resampled_means, t_quantile,
+                          units_digest)
+
 N_BOOTSTRAP = 200
-LEVEL = 0.95
-MIN_UNITS = 3  # a bootstrap over fewer units says nothing about the noise: the comparison is inconclusive
 REL_TIE = 1e-9  # differences below this (relative) are floating-point ties
-# two-sided 97.5 % quantiles of Student's t by degrees of freedom (Welch); beyond 30: normal
-_T975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306, 9: 2.262,
-         10: 2.228, 12: 2.179, 15: 2.131, 20: 2.086, 30: 2.042}
-
-
-def units_digest(unit_ids: Sequence) -> str:
-    """Identity of a set of evaluation units (order-free)."""
-    h = hashlib.sha1("\n".join(sorted(str(u) for u in unit_ids)).encode())
-    return h.hexdigest()[:16]
-
-
-def resample_indices(unit_ids: Sequence, n: int = N_BOOTSTRAP) -> tuple[np.ndarray, list]:
-    """(B x N indices into the *sorted* unit ids, the sorted ids): the same for every row on the same units."""
-    ids = sorted(str(u) for u in unit_ids)
-    seed = int(units_digest(ids), 16) % (2 ** 32)
-    rng = np.random.default_rng(seed)
-    return rng.integers(0, len(ids), size=(n, len(ids))), ids
+NO_RECORD = "a cell without a noise record"
+EXACT = {"kind": "exact"}  # a printed number taken as it is (the thesis' own table): no spread, not a measurement
 
 
 def bootstrap(per_unit: Mapping | None = None, *, unit_ids: Sequence | None = None,
               statistic: Callable[[list], float] | None = None, n: int = N_BOOTSTRAP) -> dict:
-    """Bootstrap record of one cell.
+    """Bootstrap record of one cell, resampling the units' clusters (``redsup.stats``: ``"<scene>/<frame>"``).
 
     Either ``per_unit`` = {unit id: value} (the cell is their mean, e.g. Monodepth2's per-frame average),
     or ``unit_ids`` with ``statistic(list of unit ids) -> value`` (e.g. AP recomputed on a multiset of
@@ -68,27 +50,28 @@ def bootstrap(per_unit: Mapping | None = None, *, unit_ids: Sequence | None = No
     a fallback before, never drops them silently).
     """
     if per_unit is not None:
-        idx, ids = resample_indices(list(per_unit), n)
+        ids = sorted(str(u) for u in per_unit)
         by_id = {str(k): float(v) for k, v in per_unit.items()}
-        vals = np.array([by_id[i] for i in ids])
-        reps = vals[idx].mean(axis=1)
+        reps = resampled_means(np.array([by_id[i] for i in ids]), ids, n)
+        units = list(per_unit)
     elif unit_ids is not None and statistic is not None:
-        idx, ids = resample_indices(unit_ids, n)
-        reps = np.array([float(statistic([ids[i] for i in row])) for row in idx])
-        per_unit = {u: None for u in ids}
+        sets, ids = resample_sets(unit_ids, n)
+        reps = np.array([float(statistic([ids[i] for i in row])) for row in sets])
+        units = ids
     else:
         raise ValueError("bootstrap: give per_unit, or unit_ids and statistic")
-    return {"kind": "bootstrap", "values": [float(r) for r in reps], "units": units_digest(list(per_unit)),
-            "n_units": len(per_unit)}
+    return {"kind": "bootstrap", "values": [float(r) for r in reps], "units": units_digest(units),
+            "n_units": len(units), "n_clusters": n_clusters(units)}
 
 
 def replicates(payload: Mapping | None, key: str) -> dict | None:
-    """Bootstrap record of one metric from an evaluation's stored replicates (``{"units", "n_units", "values":
-    {key: [B floats]}}``, e.g. ``redsup.det3d.kitti_eval.bootstrap_ap``), or None when it has none for ``key``."""
+    """Bootstrap record of one metric from an evaluation's stored replicates (``{"units", "n_units", "n_clusters",
+    "values": {key: [B floats]}}``, e.g. ``redsup.det3d.kitti_eval.bootstrap_ap``), or None when it has none for
+    ``key``."""
     if not payload or key not in payload.get("values", {}):
         return None
     return {"kind": "bootstrap", "values": [float(v) for v in payload["values"][key]], "units": payload["units"],
-            "n_units": int(payload["n_units"])}
+            "n_units": int(payload["n_units"]), "n_clusters": int(payload.get("n_clusters", payload["n_units"]))}
 
 
 def seeds(values: Sequence[float], pair: str | None = None) -> dict:
@@ -102,18 +85,18 @@ def seeds(values: Sequence[float], pair: str | None = None) -> dict:
 
 def with_sampling(seed_record: Mapping, boot_records: Sequence[Mapping | None]) -> dict:
     """``seed_record`` with the test-sampling noise of its mean: ``boot_records`` are the seeds' bootstrap
-    records (one a seed, in seed order). Attached only when every seed has one, over the same units (at least
-    MIN_UNITS of them) with the same number of replicates (then replicate r of the mean is the mean of the seeds'
-    r-th replicates); otherwise the record is returned unchanged."""
+    records (one a seed, in seed order). Attached only when every seed has one, over the same units with the same
+    number of replicates (then replicate r of the mean is the mean of the seeds' r-th replicates); otherwise the
+    record is returned unchanged. Too few clusters are attached as they are: the interval then says so."""
     rec = dict(seed_record)
     recs = list(boot_records)
     if (not recs or len(recs) != len(rec["values"]) or any(not b or b.get("kind") != "bootstrap" for b in recs)
-            or len({b["units"] for b in recs}) != 1 or len({len(b["values"]) for b in recs}) != 1
-            or int(recs[0].get("n_units", MIN_UNITS)) < MIN_UNITS):
+            or len({b["units"] for b in recs}) != 1 or len({len(b["values"]) for b in recs}) != 1):
         return rec
     rec["boot"] = [float(x) for x in np.mean([np.asarray(b["values"], float) for b in recs], axis=0)]
     rec["units"] = recs[0]["units"]
-    rec["n_units"] = int(recs[0].get("n_units", MIN_UNITS))
+    rec["n_units"] = int(recs[0]["n_units"])
+    rec["n_clusters"] = _clusters(recs[0])
     return rec
 
 
@@ -127,66 +110,109 @@ def spread(noise: Mapping | None) -> float | None:
     return float(np.std(v, ddof=1))
 
 
-def _var_of_mean(noise: Mapping | None) -> tuple[float, int | None]:
-    """(variance of the cell value, degrees of freedom or None for 'large')."""
-    if not noise or len(noise.get("values", ())) < 2:
-        return 0.0, None
+def _clusters(rec: Mapping) -> int:
+    """Clusters a bootstrap record resampled (records written before clusters were counted: their units)."""
+    return int(rec.get("n_clusters", rec.get("n_units", 0)))
+
+
+def _sampling_var(replicates: np.ndarray, clusters: int) -> tuple[float, int]:
+    """(variance, df) of a cell's test-sampling noise from its cluster-bootstrap replicates: the replicates'
+    variance times G / (G - 1) (the bootstrap's plug-in variance of a mean over G clusters is (G - 1) / G of the
+    unbiased one) with G - 1 degrees of freedom, so that few clusters give a wide Student-t interval."""
+    return float(np.var(replicates, ddof=1)) * clusters / (clusters - 1), clusters - 1
+
+
+def _seed_part(noise: Mapping) -> tuple[float, int]:
+    """(variance, df) of a seed record's mean over its seeds."""
     v = np.asarray(noise["values"], dtype=float)
-    if noise["kind"] == "seeds":
-        return float(np.var(v, ddof=1)) / len(v), len(v) - 1
-    return float(np.var(v, ddof=1)), None
+    return float(np.var(v, ddof=1)) / len(v), len(v) - 1
+
+
+def _too_few_clusters(noise: Mapping) -> int | None:
+    """The record's cluster count when it has test-sampling replicates over fewer than MIN_CLUSTERS clusters."""
+    if _boot_of(noise) is None:
+        return None
+    g = _clusters(noise)
+    return g if g < MIN_CLUSTERS else None
 
 
 def t975(df: float | None) -> float:
-    if df is None or df > 30:
-        return 1.96
-    keys = sorted(_T975)
-    k = max([x for x in keys if x <= max(1.0, df)] or [1])
-    return _T975[k]
+    """Two-sided 95 % quantile of Student's t (normal for None)."""
+    return t_quantile(df, LEVEL)
+
+
+def _satterthwaite(parts: Sequence[tuple[float, float]]) -> float | None:
+    total = sum(v for v, _ in parts)
+    den = sum(v ** 2 / df for v, df in parts if v > 0)
+    return total ** 2 / den if den > 0 else None
 
 
 def difference_interval(a: float, b: float, noise_a: Mapping | None = None,
                         noise_b: Mapping | None = None) -> tuple[float, float, str]:
-    """(low, high, method) of the 95 % interval of ``a - b`` (NaN when the noise cannot be measured: a
-    bootstrap over fewer than MIN_UNITS units)."""
+    """(low, high, method) of the 95 % interval of ``a - b`` (module docstring); NaN, i.e. no verdict, when a cell
+    has no noise record or its test-sampling noise comes from fewer than MIN_CLUSTERS clusters."""
     d = a - b
     if not (math.isfinite(a) and math.isfinite(b)):
         return math.nan, math.nan, "non-finite"
     if abs(d) <= REL_TIE * max(1.0, abs(a), abs(b)):
         d = 0.0  # a floating-point tie
-    few = [n for n in (noise_a, noise_b) if n and n["kind"] == "bootstrap" and n.get("n_units", MIN_UNITS) < MIN_UNITS]
-    if few:
-        return math.nan, math.nan, f"bootstrap over fewer than {MIN_UNITS} units"
-    if any(n and n["kind"] == "seeds" and "boot" in n for n in (noise_a, noise_b)):
-        return _seeds_and_sampling(d, noise_a, noise_b)
-    if (noise_a and noise_b and noise_a["kind"] == noise_b["kind"] == "bootstrap"
-            and noise_a.get("units") == noise_b.get("units")
-            and len(noise_a["values"]) == len(noise_b["values"])):
-        diff = np.asarray(noise_a["values"], float) - np.asarray(noise_b["values"], float)
-        if not np.all(np.isfinite(diff)):
-            return math.nan, math.nan, "non-finite"
-        # basic (pivot-free) percentile interval of the paired replicate differences, centred on d
-        lo, hi = np.quantile(diff - diff.mean(), [(1 - LEVEL) / 2, (1 + LEVEL) / 2])
-        return d + float(lo), d + float(hi), "paired bootstrap"
+    if not noise_a or not noise_b:
+        return math.nan, math.nan, NO_RECORD
+    if few := _few_clusters(noise_a, noise_b):
+        return math.nan, math.nan, few
+    how = []
     diff = _paired_seed_differences(noise_a, noise_b)
     if diff is not None:
-        if not np.all(np.isfinite(diff)):
-            return math.nan, math.nan, "non-finite"
-        half = t975(len(diff) - 1) * float(np.std(diff, ddof=1)) / math.sqrt(len(diff))
-        return d - half, d + half, "paired seeds"
-    va, dfa = _var_of_mean(noise_a)
-    vb, dfb = _var_of_mean(noise_b)
-    if va == 0.0 and vb == 0.0:
-        has = bool(noise_a) or bool(noise_b)
-        return d, d, "seeds/bootstrap without spread" if has else "single values"
-    # Welch-Satterthwaite degrees of freedom (bootstrap sides count as large samples)
-    parts = [(va, dfa), (vb, dfb)]
-    num = (va + vb) ** 2
-    den = sum(v ** 2 / df for v, df in parts if v > 0 and df)
-    df = num / den if den > 0 else None
-    half = t975(df) * math.sqrt(va + vb)
-    methods = sorted({n["kind"] for n in (noise_a, noise_b) if n})
-    return d - half, d + half, "+".join(methods) + " (unpaired)"
+        seed_parts = [(float(np.var(diff, ddof=1)) / len(diff), len(diff) - 1)]
+        how.append("paired seeds")
+    else:
+        seed_parts = [_seed_part(n) for n in (noise_a, noise_b) if n["kind"] == "seeds" and len(n["values"]) >= 2]
+        how += ["seeds"] if seed_parts else []
+    ba, bb = _boot_of(noise_a), _boot_of(noise_b)
+    if ba is not None and bb is not None and noise_a.get("units") == noise_b.get("units") and len(ba) == len(bb):
+        sampling_parts = [_sampling_var(ba - bb, _clusters(noise_a))]
+        how.append(f"paired cluster bootstrap, {_clusters(noise_a)} clusters")
+    else:
+        sampling_parts = [_sampling_var(boot, _clusters(rec)) for rec, boot in ((noise_a, ba), (noise_b, bb))
+                          if boot is not None]
+        how += ["cluster bootstrap"] if sampling_parts else []
+    return _interval(d, seed_parts, sampling_parts, " + ".join(how) or "exact values")
+
+
+def value_interval(v: float, noise: Mapping | None) -> tuple[float, float, str]:
+    """95 % interval of one cell's value (a range check), by the rules of ``difference_interval``."""
+    if not math.isfinite(v):
+        return math.nan, math.nan, "non-finite"
+    if not noise:
+        return math.nan, math.nan, NO_RECORD
+    if few := _few_clusters(noise):
+        return math.nan, math.nan, few
+    seed_parts = [_seed_part(noise)] if noise["kind"] == "seeds" and len(noise["values"]) >= 2 else []
+    boot = _boot_of(noise)
+    sampling_parts = [_sampling_var(boot, _clusters(noise))] if boot is not None else []
+    how = " + ".join(x for x, p in (("seeds", seed_parts), ("cluster bootstrap", sampling_parts)) if p)
+    return _interval(v, seed_parts, sampling_parts, how or noise["kind"])
+
+
+def _few_clusters(*records: Mapping) -> str | None:
+    """Why there is no verdict when a record's test-sampling noise comes from fewer than MIN_CLUSTERS clusters."""
+    few = [g for g in (_too_few_clusters(r) for r in records) if g is not None]
+    return f"test units in {min(few)} clusters (fewer than {MIN_CLUSTERS})" if few else None
+
+
+def _interval(d: float, seed_parts: list[tuple[float, float]], sampling_parts: list[tuple[float, float]],
+              how: str) -> tuple[float, float, str]:
+    """d -+ t x sd over the seed and sampling variances (Welch-Satterthwaite df), never narrower than the seed
+    part's or the sampling part's interval alone: adding the sampling noise never narrows an interval."""
+    parts = seed_parts + sampling_parts
+    if not all(math.isfinite(v) for v, _ in parts):
+        return math.nan, math.nan, "non-finite"
+    total = sum(v for v, _ in parts)
+    if total == 0.0:
+        return d, d, how
+    half = max(t975(_satterthwaite(group)) * math.sqrt(sum(v for v, _ in group))
+               for group in (parts, seed_parts, sampling_parts) if group)
+    return d - half, d + half, how
 
 
 def _paired_seed_differences(noise_a: Mapping | None, noise_b: Mapping | None) -> np.ndarray | None:
@@ -203,50 +229,7 @@ def _boot_of(noise: Mapping | None) -> np.ndarray | None:
         return None
     if noise["kind"] == "bootstrap":
         return np.asarray(noise["values"], float)
-    return np.asarray(noise["boot"], float) if "boot" in noise else None
-
-
-def _seeds_and_sampling(d: float, noise_a: Mapping | None, noise_b: Mapping | None) -> tuple[float, float, str]:
-    """Interval of ``d = a - b`` when a seed record carries its test-sampling replicates (``with_sampling``):
-    seed variance of the difference (paired seed by seed when both are records of the same models) plus its
-    bootstrap variance (paired when both have replicates on the same units); Welch-Satterthwaite t, the half width
-    at least each part's own."""
-    parts: list[tuple[float, float | None]] = []  # (variance, df or None for a large sample)
-    how = []
-    sa = noise_a if noise_a and noise_a["kind"] == "seeds" else None
-    sb = noise_b if noise_b and noise_b["kind"] == "seeds" else None
-    diff = _paired_seed_differences(noise_a, noise_b)
-    if diff is not None:
-        parts.append((float(np.var(diff, ddof=1)) / len(diff), len(diff) - 1))
-        how.append("paired seeds")
-    else:
-        for s in (sa, sb):
-            if s and len(s["values"]) >= 2:
-                parts.append((float(np.var(np.asarray(s["values"], float), ddof=1)) / len(s["values"]),
-                              len(s["values"]) - 1))
-        how.append("seeds")
-    ba, bb = _boot_of(noise_a), _boot_of(noise_b)
-    if (ba is not None and bb is not None and noise_a.get("units") == noise_b.get("units")
-            and len(ba) == len(bb)):
-        parts.append((float(np.var(ba - bb, ddof=1)), None))
-        how.append("paired test bootstrap")
-    else:
-        parts += [(float(np.var(b, ddof=1)), None) for b in (ba, bb) if b is not None]
-        how.append("test bootstrap (unpaired)")
-    if not all(math.isfinite(v) for v, _ in parts):
-        return math.nan, math.nan, "non-finite"
-    total = sum(v for v, _ in parts)
-    if total == 0.0:
-        return d, d, "seeds/bootstrap without spread"
-    # Welch-Satterthwaite over both parts (the bootstrap part a large sample). Its df grow with the well-measured
-    # bootstrap part, so t can shrink more than the variance grows: the half width is never narrower than either
-    # part's own interval, and adding the sampling noise never narrows an interval
-    seed_total = sum(v for v, df in parts if df)
-    den = sum(v ** 2 / df for v, df in parts if v > 0 and df)
-    half = max(t975(total ** 2 / den if den > 0 else None) * math.sqrt(total),
-               t975(seed_total ** 2 / den if den > 0 else None) * math.sqrt(seed_total),
-               t975(None) * math.sqrt(total - seed_total))
-    return d - half, d + half, " + ".join(how)
+    return np.asarray(noise["boot"], float) if noise.get("boot") is not None else None
 
 
 def verdict_of_interval(lo: float, hi: float) -> str | None:

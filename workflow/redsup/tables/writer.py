@@ -11,14 +11,14 @@ from pathlib import Path
 import pandas as pd
 
 from redsup.tables import noise as noise_lib
-from redsup.tables.claims import (DOES_NOT_HOLD, VERDICTS, align_noise, count_verdicts, evaluate_claims,
+from redsup.tables.claims import (COUNTED, DOES_NOT_HOLD, VERDICTS, align_noise, count_verdicts, evaluate_claims,
                                   evaluate_claims_on_paper, headline_tau)
 from redsup.tables.registry import (align, as_frame, load_registry, paper_table, paper_values,
                                     table_info)
 
 DASH = "—"
-MARK = {"reproduces": "✔", "contradicted": "✘", "inconclusive": "≈", "not testable": "○",
-        "data description": "▫"}
+MARK = {"reproduces": "✔", "contradicted": "✘", "inconclusive": "≈", "thesis effect ruled out": "⊘",
+        "not testable": "○", "data description": "▫"}
 
 
 # ------------------------------------------------------------------------------------ formatting
@@ -331,17 +331,19 @@ def write_scorecard(score_jsons: Iterable[str | Path], out_md, registry: dict | 
             st[k] += s["counts"][k]
     taus = [s["kendall_tau"] for s in scores if s["kendall_tau"] is not None]
     paper_bad = [(s["table_id"], c["text"]) for s in scores for c in s["claims"]
-                 if c["verdict"] in VERDICTS[:3] and c.get("verdict_on_paper") not in (None, "reproduces")]
+                 if c["verdict"] in COUNTED and c.get("verdict_on_paper") not in (None, "reproduces")]
     listed_false = [(s["table_id"], c["text"]) for s in scores for c in s["claims"]
                     if c.get("on_our_data") == DOES_NOT_HOLD]
-    tested = total["reproduces"] + total["inconclusive"] + total["contradicted"]
+    tested = sum(total[v.replace(" ", "_")] for v in COUNTED)
     head = " | ".join(VERDICTS)
     md = ["# Scorecard: paper vs ours", "",
           f"{len(scores)} tables. Each claim of the theses is decided on our numbers with the measured noise "
-          "(95 % intervals over the training seeds and, where a row keeps per-unit results, a paired bootstrap "
-          "over the test units; each verdict names what its interval covers): **reproduces** "
-          "(the claimed effect is beyond the noise), **inconclusive** (inside the noise, a tie, or a cell "
-          "missing), **contradicted** (the opposite effect is beyond the noise); **not testable** (about prior "
+          "(95 % Student-t intervals over the training seeds and, where a row keeps per-unit results, a cluster "
+          "bootstrap over the test scenes; each verdict names what its interval covers; a cell without a noise "
+          "record, or measured on fewer than 5 scenes, decides nothing): **reproduces** (the claimed effect is "
+          "beyond the noise), **inconclusive** (inside the noise, a tie, or a cell missing: we could not tell), "
+          "**thesis effect ruled out** (no effect beyond the noise, and the interval excludes the thesis' own "
+          "effect on our scale), **contradicted** (the opposite effect is beyond the noise); **not testable** (about prior "
           "work, real data, or contradicted by the thesis' own table) and **data description** (true by how "
           "the data were configured) are listed but not counted as results. Kendall τ = tau-b of our row "
           "ordering vs the paper's on the headline metric (n = rows in both).", "",
