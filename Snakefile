@@ -50,6 +50,7 @@ rule all:
         TABLE_TARGETS,
         FIGURE_TARGETS,
         "results/tables/scorecard.md",
+        "results/tables/power.md",
         RUN_TIME_TARGETS,
 
 
@@ -68,6 +69,7 @@ rule tables:
     input:
         TABLE_TARGETS,
         "results/tables/scorecard.md",
+        "results/tables/power.md",
 
 
 rule run_time:

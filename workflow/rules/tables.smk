@@ -1,8 +1,11 @@
 # Every table through one rule (the table contract, redsup.tables.contract): its rows come from the stage's
 # plan, its inputs are the result files of their runs, one script writes it beside the thesis' numbers.
-# Included last. TABLE_IDS / FIGURE_IDS come from tables.yaml alone (common.smk).
+# Included last. TABLE_IDS / FIGURE_IDS come from tables.yaml alone (common.smk); the figures of rule all
+# are those and Galteland's progression / qualitative figures (depth.figures, GALTELAND_FIGURES of depth.smk).
 TABLE_TARGETS = expand("results/tables/{table}.{ext}", table=TABLE_IDS, ext=("md", "csv", "tex"))
-FIGURE_TARGETS = expand("results/figures/{figure}.png", figure=FIGURE_IDS)
+FIGURE_TARGETS = expand(
+    "results/figures/{figure}.png", figure=FIGURE_IDS + [f for f in GALTELAND_FIGURES if f not in FIGURE_IDS]
+)
 
 
 rule table:
@@ -24,8 +27,8 @@ rule table:
         table="|".join(TABLE_IDS),
     threads: 1
     resources:
-        mem_mb=1000,
-        runtime=10,
+        mem_mb=job_mem_mb(1000),
+        runtime=job_runtime(10),
     conda:
         ENVS["tables"]
     script:
@@ -43,8 +46,8 @@ rule data_summary:
         "results/benchmarks/data_summary/data/summary.tsv",
     threads: 1
     resources:
-        mem_mb=2000,
-        runtime=10,
+        mem_mb=job_mem_mb(2000),
+        runtime=job_runtime(10),
     conda:
         ENVS["tables"]
     script:
@@ -64,8 +67,8 @@ rule world_frame_overview:
         "results/benchmarks/world_frame_overview/figures/world_frame_overview.tsv",
     threads: 1
     resources:
-        mem_mb=2000,
-        runtime=10,
+        mem_mb=job_mem_mb(2000),
+        runtime=job_runtime(10),
     conda:
         ENVS["tables"]
     script:
@@ -83,9 +86,29 @@ rule scorecard:
         "results/benchmarks/scorecard/tables/scorecard.tsv",
     threads: 1
     resources:
-        mem_mb=500,
-        runtime=5,
+        mem_mb=job_mem_mb(500),
+        runtime=job_runtime(5),
     conda:
         ENVS["tables"]
     script:
         "../scripts/scorecard.py"
+
+
+rule power:
+    input:
+        expand("results/tables/{table}.score.json", table=TABLE_IDS),
+    output:
+        md="results/tables/power.md",
+        csv="results/tables/power.csv",
+    log:
+        "results/logs/tables/power.log",
+    benchmark:
+        "results/benchmarks/power/tables/power.tsv",
+    threads: 1
+    resources:
+        mem_mb=job_mem_mb(500),
+        runtime=job_runtime(5),
+    conda:
+        ENVS["tables"]
+    script:
+        "../scripts/power.py"
