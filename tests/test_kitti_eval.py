@@ -73,8 +73,9 @@ def _car(x, y=0.0, l=3.9, w=1.6, yaw=0.0):
     return [x, y, 0.75, l, w, 1.5, yaw]
 
 
-def _scene(objects):
-    """objects: list of frames; each frame a (gts, dets) pair of lists of dicts."""
+def _scene(objects, alpha=False):
+    """objects: list of frames; each frame a (gts, dets) pair of lists of dicts. ``alpha``: give every frame
+    its objects' "alpha" (default -10, KITTI's "no orientation")."""
     gts, dets = [], []
     for frame_gt, frame_det in objects:
         gts.append(K.FrameGT(
@@ -82,12 +83,14 @@ def _scene(objects):
             bbox=np.array([o.get("bbox", [100, 100, 150, 160]) for o in frame_gt], dtype=float).reshape(-1, 4),
             occlusion=np.array([o.get("occ", 0) for o in frame_gt], dtype=int),
             truncation=np.array([o.get("trunc", 0.0) for o in frame_gt], dtype=float),
-            cls=np.array([o.get("cls", "Car") for o in frame_gt], dtype=object)))
+            cls=np.array([o.get("cls", "Car") for o in frame_gt], dtype=object),
+            alpha=np.array([o.get("alpha", -10.0) for o in frame_gt], dtype=float) if alpha else None))
         dets.append(K.FrameDet(
             boxes=np.array([o["box"] for o in frame_det], dtype=float).reshape(-1, 7),
             bbox=np.array([o.get("bbox", [100, 100, 150, 160]) for o in frame_det], dtype=float).reshape(-1, 4),
             score=np.array([o["score"] for o in frame_det], dtype=float),
-            cls=np.array([o.get("cls", "Car") for o in frame_det], dtype=object)))
+            cls=np.array([o.get("cls", "Car") for o in frame_det], dtype=object),
+            alpha=np.array([o.get("alpha", -10.0) for o in frame_det], dtype=float) if alpha else None))
     return gts, dets
 
 
@@ -190,6 +193,54 @@ def test_no_ground_truth_gives_nan():
     assert all(math.isnan(v) for v in res.values())
 
 
+# ------------------------------------------------------------------------------------ AOS hand cases
+def test_aos_of_three_cars_and_a_false_positive():
+    """Three frames, one car each (alpha_gt 0, 1, -0.5), detected with orientation errors 0, pi/2, pi, plus a
+    false positive that outscores them all:
+    similarity of each true positive (1 + cos(error)) / 2 = 1, 0.5, 0.
+    3 valid cars, TP scores 0.9, 0.8, 0.7: getThresholds keeps all three (recall 1/3 .. 1 is past every 1/40 step).
+      threshold 0.9: TP 1, FP 1 -> precision 1/2, aos 1/2;   0.8: TP 2, FP 1 -> 2/3, (1 + 0.5)/3 = 1/2;
+      0.7: TP 3, FP 1 -> 3/4, 1.5/4 = 3/8;                   points 3..40: 0.
+    Monotone (max over the points after): precision 3/4, 3/4, 3/4; aos 1/2, 1/2, 3/8.
+    AP  R11 = point 0 / 11 = 75/11;   R40 = points 1, 2 / 40 = 1.5/40 = 3.75 %.
+    AOS R11 = 50/11;                  R40 = (0.5 + 0.375)/40 = 2.1875 %."""
+    fp_bbox = [300, 100, 350, 160]
+    frames = [([{"box": _car(10), "alpha": 0.0}], [{"box": _car(10), "score": 0.9, "alpha": 0.0}]),
+              ([{"box": _car(12), "alpha": 1.0}], [{"box": _car(12), "score": 0.8, "alpha": 1.0 + math.pi / 2}]),
+              ([{"box": _car(14), "alpha": -0.5}], [{"box": _car(14), "score": 0.7, "alpha": -0.5 + math.pi},
+                                                    {"box": _car(30), "score": 0.95, "alpha": 0.3, "bbox": fp_bbox}])]
+    res = K.evaluate(*_scene(frames, alpha=True), metrics=("2d",), iou_thresholds={"Car": (0.7,)})
+    assert res["Car_2d_0.7/easy_R11"] == pytest.approx(75 / 11) and res["Car_2d_0.7/easy_R40"] == pytest.approx(3.75)
+    assert res["Car_aos_0.7/easy_R11"] == pytest.approx(50 / 11)
+    assert res["Car_aos_0.7/easy_R40"] == pytest.approx(2.1875)
+    assert res["Car_aos_0.7/hard_R40"] == pytest.approx(2.1875)        # all three are easy, so also moderate, hard
+
+
+def test_aos_is_ap_times_the_similarity_of_a_constant_error():
+    """41 exact detections, each 60 degrees off in alpha: every true positive counts (1 + cos 60)/2 = 3/4, so at
+    every threshold aos = 3/4 precision = 3/4: AOS 75 where AP is 100 (an error of 2 pi counts as none)."""
+    frames = [([{"box": _car(10.0 + i % 7), "alpha": 0.2}],
+               [{"box": _car(10.0 + i % 7), "score": 0.9 - 0.001 * i, "alpha": 0.2 + math.pi / 3 + 2 * math.pi * i}])
+              for i in range(41)]
+    res = K.evaluate(*_scene(frames, alpha=True), metrics=("2d", "bev"))
+    aos = {k: v for k, v in res.items() if "_aos_" in k}
+    assert len(aos) == 2 * 3 * 2                              # the 2d metric's IoU 0.7 and 0.5, 3 difficulties
+    assert all(v == pytest.approx(75.0) for v in aos.values()), aos
+    assert res["Car_2d_0.7/moderate_R40"] == pytest.approx(100.0)
+
+
+def test_no_aos_without_orientations_or_2d():
+    frames = [([{"box": _car(10.0), "alpha": 0.0}], [{"box": _car(10.0), "score": 0.9, "alpha": 0.1}])]
+    has_aos = lambda res: any("_aos_" in k for k in res)                       # noqa: E731
+    assert has_aos(K.evaluate(*_scene(frames, alpha=True), metrics=("2d",)))
+    assert not has_aos(K.evaluate(*_scene(frames, alpha=True), metrics=("bev", "3d")))
+    assert not has_aos(K.evaluate(*_scene(frames), metrics=("2d",)))            # no alpha given
+    no_orientation = frames + [([], [{"box": _car(20.0), "score": 0.5}])]      # one detection with alpha -10
+    assert not has_aos(K.evaluate(*_scene(no_orientation, alpha=True), metrics=("2d",)))
+    gts, dets = _scene(frames, alpha=True)
+    assert not K.has_orientation(gts, [K.FrameDet(dets[0].boxes, dets[0].bbox, dets[0].score, alpha=[np.nan])])
+
+
 # ------------------------------------------------------------- loop transliteration of the devkit
 def _frame_overlaps(gt, det, metric, criterion=-1):
     if metric == "2d":
@@ -198,7 +249,8 @@ def _frame_overlaps(gt, det, metric, criterion=-1):
 
 
 def _devkit_ap(gts, dets, cls, difficulty, metric, min_overlap):
-    """computeStatistics / eval_class of evaluate_object.cpp, one loop per loop, frame by frame."""
+    """computeStatistics / eval_class of evaluate_object.cpp, one loop per loop, frame by frame: AP (R11, R40) and
+    AOS (R11, R40; the frames carry alpha)."""
     NO_DET = -1e7
     prepared, n_gt = [], 0
     for gt, det in zip(gts, dets):
@@ -227,13 +279,13 @@ def _devkit_ap(gts, dets, cls, difficulty, metric, min_overlap):
         if dc and len(det.score):
             sub = K.FrameGT(gt.boxes[dc], gt.bbox[dc], gt.occlusion[dc], gt.truncation[dc], gt.cls[dc])
             dc_ov = _frame_overlaps(sub, det, metric, criterion=0)
-        prepared.append((ign_gt, ign_det, ov, dc_ov, det.score))
+        prepared.append((ign_gt, ign_det, ov, dc_ov, det.score, gt.alpha, det.alpha))
 
-    def stats(ign_gt, ign_det, ov, dc_ov, score, compute_fp, thresh):
+    def stats(ign_gt, ign_det, ov, dc_ov, score, gt_alpha, det_alpha, compute_fp, thresh):
         assigned = [False] * len(score)
         below = [compute_fp and s < thresh for s in score]
         tp = fp = fn = 0
-        v = []
+        v, delta = [], []
         for i in range(len(ign_gt)):
             if ign_gt[i] == -1:
                 continue
@@ -255,6 +307,7 @@ def _devkit_ap(gts, dets, cls, difficulty, metric, min_overlap):
             elif valid_det != NO_DET:
                 tp += 1
                 v.append(score[det_idx])
+                delta.append(gt_alpha[i] - det_alpha[det_idx])
                 assigned[det_idx] = True
         if compute_fp:
             fp = sum(1 for j in range(len(score)) if not (assigned[j] or ign_det[j] != 0 or below[j]))
@@ -265,22 +318,28 @@ def _devkit_ap(gts, dets, cls, difficulty, metric, min_overlap):
                     if dc_ov[j, i] > min_overlap:
                         assigned[j] = True
                         fp -= 1
-        return tp, fp, fn, v
+        # compute_aos: FP count 0, each TP (1 + cos(delta)) / 2; a frame with neither adds nothing (-1)
+        similarity = sum((1.0 + math.cos(d)) / 2.0 for d in delta) if tp > 0 or fp > 0 else -1
+        return tp, fp, fn, v, similarity
 
     v = []
     for p in prepared:
         v += stats(*p, compute_fp=False, thresh=0.0)[3]
     thr = K.thresholds(np.array(v), n_gt)
-    precision = np.zeros(41)
+    precision, aos = np.zeros(41), np.zeros(41)
     for t, th in enumerate(thr):
-        tp = fp = 0
+        tp = fp = similarity = 0
         for p in prepared:
-            a, b, _, _ = stats(*p, compute_fp=True, thresh=th)
+            a, b, _, _, sim = stats(*p, compute_fp=True, thresh=th)
             tp, fp = tp + a, fp + b
+            similarity += sim if sim != -1 else 0
         precision[t] = tp / (tp + fp)
+        aos[t] = similarity / (tp + fp)
     for t in range(len(thr)):
         precision[t] = precision[t:].max()
-    return precision[0::4].sum() / 11 * 100, precision[1:].sum() / 40 * 100
+        aos[t] = aos[t:].max()
+    return (precision[0::4].sum() / 11 * 100, precision[1:].sum() / 40 * 100,
+            aos[0::4].sum() / 11 * 100, aos[1:].sum() / 40 * 100)
 
 
 def _random_scene(rng, n_frames):
@@ -295,15 +354,17 @@ def _random_scene(rng, n_frames):
                       "cls": str(rng.choice(["Car"] * 6 + ["Van", "Pedestrian", "DontCare"]))})
         d = []
         for o in g:
+            o["alpha"] = rng.uniform(-math.pi, math.pi)
             if rng.random() < 0.8:
                 box = np.array(o["box"]) + np.r_[rng.normal(0, 0.2, 3), rng.normal(0, 0.1, 3), rng.normal(0, 0.1)]
                 bb = np.array(o["bbox"]) + rng.normal(0, 2, 4)
                 d.append({"box": box.tolist(), "bbox": bb.tolist(), "score": float(rng.random()),
-                          "cls": str(rng.choice(["Car"] * 5 + ["Pedestrian"]))})
+                          "cls": str(rng.choice(["Car"] * 5 + ["Pedestrian"])),
+                          "alpha": o["alpha"] + rng.choice([0.0, 1.0]) * rng.normal(0, 1.5)})
         for _ in range(rng.integers(0, 3)):
             top = rng.uniform(0, 100)
             d.append({"box": _car(rng.uniform(5, 40), rng.uniform(-8, 8)), "score": float(rng.random()),
-                      "bbox": [200, top, 260, top + rng.choice([20, 30, 50])]})
+                      "bbox": [200, top, 260, top + rng.choice([20, 30, 50])], "alpha": rng.uniform(-3, 3)})
         frames.append((g, d))
     return frames
 
@@ -311,18 +372,24 @@ def _random_scene(rng, n_frames):
 @pytest.mark.parametrize("seed", [0, 1])
 def test_vectorised_matches_loop_transliteration(seed):
     rng = np.random.default_rng(seed)
-    gts, dets = _scene(_random_scene(rng, 80))
+    gts, dets = _scene(_random_scene(rng, 80), alpha=True)
     res = K.evaluate(gts, dets, metrics=("2d", "bev", "3d"), iou_thresholds={"Car": (0.7, 0.5)})
-    checked = 0
+    checked = aos_below_ap = 0
     for metric in ("2d", "bev", "3d"):
         for d, name in enumerate(K.DIFFICULTIES):
             for thr in (0.7, 0.5):
-                r11, r40 = _devkit_ap(gts, dets, "Car", d, metric, thr)
+                r11, r40, aos11, aos40 = _devkit_ap(gts, dets, "Car", d, metric, thr)
                 key = f"Car_{metric}_{thr:g}/{name}"
                 assert res[f"{key}_R11"] == pytest.approx(r11, abs=1e-9), key
                 assert res[f"{key}_R40"] == pytest.approx(r40, abs=1e-9), key
                 checked += r40 > 0
+                if metric == "2d":
+                    aos_key = f"Car_aos_{thr:g}/{name}"
+                    assert res[f"{aos_key}_R11"] == pytest.approx(aos11, abs=1e-9), aos_key
+                    assert res[f"{aos_key}_R40"] == pytest.approx(aos40, abs=1e-9), aos_key
+                    aos_below_ap += 0 < aos40 < r40 - 1
     assert checked >= 12        # the random scene is not degenerate
+    assert aos_below_ap >= 4    # nor are its orientations
 
 
 # ------------------------------------------------------------------------------------ resampled AP (bootstrap)

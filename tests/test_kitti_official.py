@@ -1,7 +1,8 @@
-"""KITTI AP equals the official python port of the devkit (traveller59/kitti-object-eval-python) on a stored
-fixture: 90 generated frames (Car, Van, Pedestrian, Cyclist, Person_sitting, DontCare; detections with
-scores, localisation noise and false positives) in tests/data/kitti_official/{gt,det}, and the port's AP
-computed once by tests/data/kitti_official/make_fixture.py (expected.json; the port is not vendored).
+"""KITTI AP and AOS equal the official python port of the devkit (traveller59/kitti-object-eval-python) on a
+stored fixture: 90 generated frames (Car, Van, Pedestrian, Cyclist, Person_sitting, DontCare; detections with
+scores, localisation and orientation noise and false positives) in tests/data/kitti_official/{gt,det}, and the
+port's AP and AOS computed once by tests/data/kitti_official/make_fixture.py (expected.json; the port is not
+vendored).
 
 With the real, tilted KITTI calibration (../shared/realdata; skipped when absent) every box goes through the
 workflow's vehicle frame and back, and the AP must still be the port's.
@@ -44,8 +45,10 @@ def _assert_equal(got, want, tol=0.01):
 
 
 def test_fixture_covers_every_metric_class_and_recall():
-    assert len(EXPECTED) == 126            # 2d/bev/3d x (Car, Van: 2 IoU; 3 classes: 1) x 3 difficulties x R11/R40
+    assert len(EXPECTED) == 168            # 2d/bev/3d/aos x (Car, Van: 2 IoU; 3 classes: 1) x 3 difficulties x R11/R40
     assert EXPECTED["Car_3d_0.7/moderate_R40"] > 5 and EXPECTED["Car_3d_0.7/moderate_R40"] < 95
+    # the detections' orientation errors cost AOS more than the comparison's tolerance below AP
+    assert 0.05 < EXPECTED["Car_2d_0.7/moderate_R40"] - EXPECTED["Car_aos_0.7/moderate_R40"] < 5
 
 
 def test_command_equals_the_official_port():
@@ -55,7 +58,7 @@ def test_command_equals_the_official_port():
 def test_command_line_help_explains_the_format():
     out = subprocess.run([sys.executable, "-m", "redsup.det3d.kitti_eval", "--help"], capture_output=True, text=True,
                          env={**os.environ, "PYTHONPATH": str(ROOT / "workflow")}, check=True).stdout
-    assert "16" in out and "rotation_y" in out and "R40" in out and "score" in out
+    assert "16" in out and "rotation_y" in out and "R40" in out and "score" in out and "aos" in out and "alpha" in out
 
 
 def test_label_box_is_the_devkits_box():

@@ -6,8 +6,13 @@ writes gt/ and det/ (KITTI label_2 files; detections with the score in field 16)
 AP of the *official python port of the devkit* (github.com/traveller59/kitti-object-eval-python, its
 eval.py / kitti_common.py / rotate_iou.py in PORT_DIR, with `second.core...nms_gpu` imported as
 `rotate_iou` and skimage not needed; numba's CUDA simulator: NUMBA_ENABLE_CUDASIM=1). Keys as
-`redsup.det3d.kitti_eval.evaluate`: `{cls}_{2d|bev|3d}_{thr}/{easy|moderate|hard}_{R11|R40}`, thresholds
-per class: the standard one (Car/Van 0.7, others 0.5) and 0.5. R40 = mean of the port's precision[1:41].
+`redsup.det3d.kitti_eval.evaluate`: `{cls}_{2d|bev|3d|aos}_{thr}/{easy|moderate|hard}_{R11|R40}`, thresholds
+per class: the standard one (Car/Van 0.7, others 0.5) and 0.5. R40 = mean of the port's precision[1:41]; aos:
+the port's orientation similarity of the 2d metric (`eval_class(..., compute_aos=True)`), sampled the same way.
+
+    python tests/data/kitti_official/make_fixture.py PORT_DIR --expected-only
+
+recomputes expected.json from the committed gt/ and det/ without writing them again.
 """
 from __future__ import annotations
 
@@ -103,16 +108,18 @@ def official(port_dir: str) -> dict:
             thrs = sorted({STANDARD[cls], 0.5}, reverse=True)
             mo = np.zeros((len(thrs), 3, 1))
             mo[:, metric, 0] = thrs
-            ret = port.eval_class(gts, dts, [PORT_CLASS[cls]], [0, 1, 2], metric, mo)
-            prec = ret["precision"]           # (1, 3, T, 41)
-            for d, dname in enumerate(("easy", "moderate", "hard")):
-                for t, thr in enumerate(thrs):
-                    key = f"{cls}_{mname}_{thr:g}/{dname}"
-                    out[f"{key}_R11"] = float(prec[0, d, t, 0::4].sum() / 11 * 100)
-                    out[f"{key}_R40"] = float(prec[0, d, t, 1:].sum() / 40 * 100)
+            ret = port.eval_class(gts, dts, [PORT_CLASS[cls]], [0, 1, 2], metric, mo, compute_aos=metric == 0)
+            curves = {mname: ret["precision"]} | ({"aos": ret["orientation"]} if metric == 0 else {})
+            for name, curve in curves.items():        # (1, 3, T, 41)
+                for d, dname in enumerate(("easy", "moderate", "hard")):
+                    for t, thr in enumerate(thrs):
+                        key = f"{cls}_{name}_{thr:g}/{dname}"
+                        out[f"{key}_R11"] = float(curve[0, d, t, 0::4].sum() / 11 * 100)
+                        out[f"{key}_R40"] = float(curve[0, d, t, 1:].sum() / 40 * 100)
     return out
 
 
 if __name__ == "__main__":
-    generate()
+    if "--expected-only" not in sys.argv[2:]:
+        generate()
     (HERE / "expected.json").write_text(json.dumps(official(sys.argv[1]), indent=1, sort_keys=True) + "\n")

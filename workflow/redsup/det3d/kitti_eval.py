@@ -19,6 +19,11 @@ Per class, difficulty and metric (2d image box, bev, 3d), as in the devkit:
   detection's own area/volume, same metric) exceeds the threshold.
 - precision[i] = TP / (TP + FP) at threshold i (i < 41), then made monotone with max over i..40;
   R11 = mean of precision[0, 4, ..., 40], R40 = mean of precision[1..40], in percent.
+- AOS (average orientation similarity), with the 2d metric: in pass 2 each TP adds
+  (1 + cos(alpha_gt - alpha_det)) / 2 to the similarity of its threshold (FP add 0);
+  aos[i] = similarity / (TP + FP), made monotone and sampled (R11, R40) exactly as precision. Computed
+  when every frame's ground truth and detections carry `alpha` and no detection's alpha is -10 (the
+  devkit: "AOS is not evaluated if at least one orientation is invalid"), so AOS <= AP.
 
 DontCare: the devkit measures a detection's overlap with a DontCare entry with the current metric, so for
 bev/3d it uses the DontCare's 3D box; KITTI's DontCare rows carry dummy 3D boxes, so in practice they only
@@ -54,6 +59,7 @@ class FrameGT:
     occlusion: np.ndarray    # (G,) KITTI level 0..3
     truncation: np.ndarray   # (G,) 0..1
     cls: np.ndarray          # (G,) class names, case-insensitive
+    alpha: np.ndarray | None = field(default=None)  # (G,) observation angle (label field 4, rad); for AOS
 
 
 @dataclass(frozen=True)
@@ -63,6 +69,7 @@ class FrameDet:
     bbox: np.ndarray         # (D, 4)
     score: np.ndarray        # (D,)
     cls: np.ndarray | None = field(default=None)   # (D,) class names; None = all "Car"
+    alpha: np.ndarray | None = field(default=None)  # (D,) observation angle (rad); None or any -10: no AOS
 
 
 def thresholds(scores: np.ndarray, n_gt: int, n_sample_pts: int = N_SAMPLE_PTS) -> np.ndarray:
@@ -98,6 +105,8 @@ class _Stacked:
     det_bbox: np.ndarray      # (F, D, 4)
     det_score: np.ndarray     # (F, D)
     det_cls: np.ndarray       # (F, D)
+    gt_alpha: np.ndarray      # (F, G) observation angle, NaN where not given
+    det_alpha: np.ndarray     # (F, D)
 
 
 def _stack(gts: list[FrameGT], dets: list[FrameDet]) -> _Stacked:
@@ -107,7 +116,8 @@ def _stack(gts: list[FrameGT], dets: list[FrameDet]) -> _Stacked:
     out = _Stacked(np.full((n_f, g_max, 7), np.nan), np.full((n_f, g_max, 4), np.nan), np.full((n_f, g_max), np.nan),
                    np.full((n_f, g_max), np.nan), np.full((n_f, g_max), "", dtype=object),
                    np.full((n_f, d_max, 7), np.nan), np.full((n_f, d_max, 4), np.nan),
-                   np.full((n_f, d_max), -np.inf), np.full((n_f, d_max), "", dtype=object))
+                   np.full((n_f, d_max), -np.inf), np.full((n_f, d_max), "", dtype=object),
+                   np.full((n_f, g_max), np.nan), np.full((n_f, d_max), np.nan))
     for f, (gt, det) in enumerate(zip(gts, dets)):
         g, d = len(gt.cls), len(det.score)
         if g:
@@ -116,11 +126,15 @@ def _stack(gts: list[FrameGT], dets: list[FrameDet]) -> _Stacked:
             out.gt_occ[f, :g] = np.asarray(gt.occlusion, dtype=np.float64)
             out.gt_trunc[f, :g] = np.asarray(gt.truncation, dtype=np.float64)
             out.gt_cls[f, :g] = _lower(gt.cls, g)
+            if gt.alpha is not None:
+                out.gt_alpha[f, :g] = np.asarray(gt.alpha, dtype=np.float64)
         if d:
             out.det_boxes[f, :d] = np.asarray(det.boxes, dtype=np.float64).reshape(d, 7)
             out.det_bbox[f, :d] = np.asarray(det.bbox, dtype=np.float64).reshape(d, 4)
             out.det_score[f, :d] = np.asarray(det.score, dtype=np.float64)
             out.det_cls[f, :d] = _lower(det.cls, d)
+            if det.alpha is not None:
+                out.det_alpha[f, :d] = np.asarray(det.alpha, dtype=np.float64)
     return out
 
 
@@ -131,6 +145,20 @@ def _overlaps(st: _Stacked, metric: str, gt_rows: np.ndarray | None = None, crit
         return box_ops.image_box_overlap(st.det_bbox, gb, criterion=criterion)
     gb = st.gt_boxes if gt_rows is None else np.where(gt_rows[..., None], st.gt_boxes, np.nan)
     return box_ops.overlap_matrix_batched(st.det_boxes, gb, kind=metric, criterion=criterion)
+
+
+def has_orientation(gts: list[FrameGT], dets: list[FrameDet]) -> bool:
+    """Whether AOS can be computed: every frame gives `alpha` for its ground truth and its detections, and every
+    detection's alpha is a number other than -10 (KITTI's "no orientation"; the devkit then skips AOS)."""
+    if any(g.alpha is None for g in gts) or any(d.alpha is None for d in dets):
+        return False
+    alphas = np.concatenate([np.asarray(d.alpha, dtype=np.float64).ravel() for d in dets] + [np.zeros(0)])
+    return bool(np.isfinite(alphas).all() and (alphas != -10).all())
+
+
+def _orientation_similarity(st: _Stacked) -> np.ndarray:
+    """(F, D, G) (1 + cos(alpha_gt - alpha_det)) / 2 of every detection with every ground-truth row."""
+    return (1.0 + np.cos(st.gt_alpha[:, None, :] - st.det_alpha[:, :, None])) / 2.0
 
 
 @dataclass
@@ -179,13 +207,16 @@ def _first_pass(ov: np.ndarray, prep: _Prepared, min_overlap: float) -> np.ndarr
 
 
 def _second_pass(ov: np.ndarray, dc_ov: np.ndarray, prep: _Prepared, min_overlap: float,
-                 thr: np.ndarray, chunk_elems: int = 4_000_000) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(tp, fp, fn) per threshold (T,) of the devkit's precision pass (compute_fp=True)."""
+                 thr: np.ndarray, sim: np.ndarray | None = None, chunk_elems: int = 4_000_000
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(tp, fp, fn, similarity) per threshold (T,) of the devkit's precision pass (compute_fp=True); similarity:
+    the sum of ``sim`` (F, D, G) over the TP matches (the devkit's compute_aos), zeros without ``sim``."""
     n_f, n_d, n_g = ov.shape
     n_t = len(thr)
     tp = np.zeros(n_t, dtype=np.int64)
     fp = np.zeros(n_t, dtype=np.int64)
     fn = np.zeros(n_t, dtype=np.int64)
+    similarity = np.zeros(n_t)
     step = max(1, chunk_elems // max(1, n_t * max(n_d, 1)))
     for s in range(0, n_f, step):
         sl = slice(s, min(n_f, s + step))
@@ -208,19 +239,24 @@ def _second_pass(ov: np.ndarray, dc_ov: np.ndarray, prep: _Prepared, min_overlap
             gt_valid = (ig_g[:, g] == 0)[:, None]
             fn += ((~has) & gt_valid).sum(axis=0)
             tp += (has_v & gt_valid).sum(axis=0)
+            if sim is not None:
+                matched = np.take_along_axis(sim[sl][:, :, g], jv, axis=1)               # (f, T)
+                similarity += np.where(has_v & gt_valid, matched, 0.0).sum(axis=0)
             ff, tt = np.nonzero(has)
             assigned[ff, tt, j[ff, tt]] = True
         free = avail & ~assigned & valid_det
         in_dc = (dc_ov[sl] > min_overlap)[:, None, :]
         fp += (free & ~in_dc).sum(axis=(0, 2))
-    return tp, fp, fn
+    return tp, fp, fn, similarity
 
 
-def _ap_from_counts(tp: np.ndarray, fp: np.ndarray) -> tuple[float, float]:
+def _sampled_mean(numerator: np.ndarray, tp: np.ndarray, fp: np.ndarray) -> tuple[float, float]:
+    """R11 and R40 (percent) of numerator / (TP + FP) per threshold (0 where nothing is detected), made monotone:
+    AP for numerator = TP, AOS for numerator = the TPs' orientation similarity."""
     precision = np.zeros(N_SAMPLE_PTS)
     n = min(len(tp), N_SAMPLE_PTS)
     with np.errstate(divide="ignore", invalid="ignore"):
-        precision[:n] = np.where(tp[:n] + fp[:n] > 0, tp[:n] / np.maximum(tp[:n] + fp[:n], 1), 0.0)
+        precision[:n] = np.where(tp[:n] + fp[:n] > 0, numerator[:n] / np.maximum(tp[:n] + fp[:n], 1), 0.0)
     precision = np.maximum.accumulate(precision[::-1])[::-1]
     r11 = precision[0::4].sum() / 11 * 100
     r40 = precision[1:].sum() / 40 * 100
@@ -249,6 +285,8 @@ def evaluate(gts: list[FrameGT], dets: list[FrameDet], classes: tuple[str, ...] 
     Returns a flat dict ``{f"{cls}_{metric}_{thr:g}/{difficulty}_{R11|R40}": AP in percent}``, e.g.
     ``Car_bev_0.7/moderate_R40``. `iou_thresholds` maps class -> thresholds evaluated for every metric
     (default Car: 0.7 and 0.5; the devkit's own "0.5" table keeps 0.7 for Car 2d, pass what you report).
+    With the 2d metric and orientations (`has_orientation`) also AOS in percent, as ``Car_aos_0.7/moderate_R40``
+    (the 2d matches at that IoU).
     """
     _check(gts, dets)
     iou_thresholds = iou_thresholds or {"Car": (0.7, 0.5)}
@@ -258,9 +296,11 @@ def evaluate(gts: list[FrameGT], dets: list[FrameDet], classes: tuple[str, ...] 
     st = _stack(gts, dets)
     dontcare = st.gt_cls == "dontcare"
     prepared = {(cls, d): _prepare(st, cls, d) for cls in classes for d in range(len(DIFFICULTIES))}
+    orientation = has_orientation(gts, dets)
     results: dict[str, float] = {}
     for metric in metrics:
         ov = _overlaps(st, metric)
+        sim = _orientation_similarity(st) if metric == "2d" and orientation else None
         dc_ov = np.zeros(st.det_score.shape)
         if dontcare.any():
             dc_metric = "2d" if dontcare_2d_all_metrics else metric
@@ -270,12 +310,17 @@ def evaluate(gts: list[FrameGT], dets: list[FrameDet], classes: tuple[str, ...] 
                 prep = prepared[(cls, difficulty)]
                 for thr in iou_thresholds.get(cls, ()):
                     key = f"{cls}_{metric}_{thr:g}/{name}"
+                    aos_key = f"{cls}_aos_{thr:g}/{name}"
                     if prep.n_gt == 0:
                         results[f"{key}_R11"] = results[f"{key}_R40"] = float("nan")
+                        if sim is not None:
+                            results[f"{aos_key}_R11"] = results[f"{aos_key}_R40"] = float("nan")
                         continue
                     t = thresholds(_first_pass(ov, prep, thr), prep.n_gt)
-                    tp, fp, _ = _second_pass(ov, dc_ov, prep, thr, t)
-                    results[f"{key}_R11"], results[f"{key}_R40"] = _ap_from_counts(tp, fp)
+                    tp, fp, _, similarity = _second_pass(ov, dc_ov, prep, thr, t, sim)
+                    results[f"{key}_R11"], results[f"{key}_R40"] = _sampled_mean(tp, tp, fp)
+                    if sim is not None:
+                        results[f"{aos_key}_R11"], results[f"{aos_key}_R40"] = _sampled_mean(similarity, tp, fp)
     return results
 
 
@@ -310,8 +355,8 @@ def resampled_ap(gts: list[FrameGT], dets: list[FrameDet], index_sets, metric: s
                 a11 = a40 = float("nan")
             else:
                 t = thresholds(_first_pass(ov[idx], sub, iou), sub.n_gt)
-                tp, fp, _ = _second_pass(ov[idx], dc_ov[idx], sub, iou, t)
-                a11, a40 = _ap_from_counts(tp, fp)
+                tp, fp, _, _ = _second_pass(ov[idx], dc_ov[idx], sub, iou, t)
+                a11, a40 = _sampled_mean(tp, tp, fp)
             r11.append(a11)
             r40.append(a40)
         key = f"{cls}_{metric}_{iou:g}/{name}"
@@ -351,9 +396,12 @@ frame without a detection file has no detections.
 
 Output keys: {class}_{2d|bev|3d}_{iou}/{easy|moderate|hard}_{R11|R40}, AP in percent, for every class of
 Car, Van, Pedestrian, Cyclist, Person_sitting present in the ground truth, at its standard IoU (Car and
-Van 0.7, the others 0.5) and at 0.5. Same rules as the devkit (`evaluate_object.cpp`) and its python
-port: difficulty cuts, Van / Person_sitting ignored for Car / Pedestrian, DontCare regions (2D), 41
-recall points (R11: every 4th, R40: points 1..40). 3D / BEV boxes are upright in the rectified camera
+Van 0.7, the others 0.5) and at 0.5; and {class}_aos_{iou}/..., the average orientation similarity
+(AOS, percent) of the 2d matches, from the alpha field (4th) of both folders: each true positive counts
+(1 + cos(alpha_gt - alpha_det)) / 2 instead of 1, so AOS <= 2d AP. A detection with alpha -10 (no
+orientation) turns AOS off, as in the devkit. Same rules as the devkit (`evaluate_object.cpp`) and its
+python port: difficulty cuts, Van / Person_sitting ignored for Car / Pedestrian, DontCare regions (2D),
+41 recall points (R11: every 4th, R40: points 1..40). 3D / BEV boxes are upright in the rectified camera
 frame, as the devkit; --calib moves every box through the workflow's vehicle frame and back (the
 workflow's own path; the numbers stay the devkit's). NaN: no valid ground truth for that cell.
 """

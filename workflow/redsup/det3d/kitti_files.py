@@ -82,10 +82,12 @@ def _frame(rows: list[dict], T: np.ndarray | None, det: bool):
     n = len(rows)
     bbox = np.array([[r[k] for k in ("x1", "y1", "x2", "y2")] for r in rows], dtype=np.float64).reshape(n, 4)
     cls = np.array([r["cls"] for r in rows], dtype=object)
+    alpha = np.array([r["alpha"] for r in rows], dtype=np.float64)
     if det:
-        return FrameDet(boxes=boxes_of(rows, T), bbox=bbox, score=np.array([r["score"] for r in rows]), cls=cls)
+        return FrameDet(boxes=boxes_of(rows, T), bbox=bbox, score=np.array([r["score"] for r in rows]), cls=cls,
+                        alpha=alpha)
     return FrameGT(boxes=boxes_of(rows, T), bbox=bbox, occlusion=np.array([int(r["occlusion"]) for r in rows]),
-                   truncation=np.array([r["truncation"] for r in rows], dtype=np.float64), cls=cls)
+                   truncation=np.array([r["truncation"] for r in rows], dtype=np.float64), cls=cls, alpha=alpha)
 
 
 def read_folders(gt_dir: str | Path, det_dir: str | Path, calib_dir: str | Path | None = None
