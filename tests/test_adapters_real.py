@@ -11,14 +11,14 @@ import pytest
 import yaml
 
 from conftest import ROOT, run_snakemake
-from redsup import geometry, sceneio
+from redsup import eval_frame, geometry, sceneio
 from redsup.adapters import adapt_scene, scene_ids
 from redsup.adapters.tusimple import adapt_clips
-from redsup.det3d import eval_frame
-from redsup.det3d.kitti_eval import FrameDet, evaluate
+from redsup.boxes3d import points_in_box
+from redsup.det3d.kitti_eval import evaluate
+from redsup.det3d.kitti_types import FrameDet
 from redsup.det3d.scenes import gt_frames
 from redsup.depth.evaluation import garg_crop_mask
-from redsup.prep.boxes3d import points_in_box
 from redsup.prep.depthmap import lidar_depth_maps
 from redsup.prep.medianflow import track_split
 

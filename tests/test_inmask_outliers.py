@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 from redsup import config, sceneio
-from redsup.prep.boxes3d import distance_to_box
+from redsup.boxes3d import distance_to_box
 from redsup.prep.outliers import adapted_records, by_distance, pixel_rect, scene_records
 from redsup.world.generate import write_scene as render_scene
 from test_detection import write_scene as hand_scene
@@ -159,7 +159,7 @@ def test_real_kitti_outliers_pull_the_squared_fit_metres_away(tmp_path):
     from redsup.det3d.fit import squared_fit_translation
     from redsup.det3d.pointsets import pad_point_sets
     from redsup.det3d.template import TemplateSpec, build_template
-    from redsup.prep.boxes3d import points_in_box
+    from redsup.boxes3d import points_in_box
 
     recs = [r for _, found in _real_scenes(tmp_path, keep_points=True) for r in found]
     assert len(recs) == 3

@@ -17,8 +17,9 @@ import numpy as np
 import pytest
 
 from conftest import ROOT
+from redsup import eval_frame
 from redsup.adapters.kitti import label_to_row
-from redsup.det3d import eval_frame, kitti_eval
+from redsup.det3d import kitti_eval
 from redsup.det3d.kitti_files import _vehicle_frame, read_folders, read_objects
 
 DATA = ROOT / "tests" / "data" / "kitti_official"

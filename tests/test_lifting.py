@@ -8,8 +8,8 @@ import torch
 
 from redsup.det3d import losses as L
 from redsup.det3d import template as T
-from redsup.det3d.kitti_eval import FrameDet, FrameGT
 from redsup.det3d.kitti_pixels import kitti_pixel_scale, scale_frames
+from redsup.det3d.kitti_types import FrameDet, FrameGT
 from redsup.lifting import data as D
 from redsup.lifting import frames as F
 from redsup.lifting.criterion import (AlignmentAtBestBin, AlignmentOverHypotheses, MultiViewConsistency,

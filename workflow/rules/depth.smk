@@ -17,8 +17,8 @@ import redsup.depth.plan as depth_plan
 DEPTH_RUNS = depth_plan.runs(config, scenes_of)
 DEPTH_MODELS = depth_plan.models(config, scenes_of)  # <dataset>/<mode>[/seed<k>]
 DEPTH_FIGURES = [t for t in FIGURE_IDS if "figure" in config["depth"]["tables"].get(t, {})]
-GALTELAND_FIGURES = depth_plan.figures(config, scenes_of)  # depth.figures: progression / qualitative PNGs
-FIGURE_IDS.extend(f for f in GALTELAND_FIGURES if f not in FIGURE_IDS)  # targets of rule all (tables.smk)
+# depth.figures: progression / qualitative PNGs (targets of rule all with the tables' figures: tables.smk)
+GALTELAND_FIGURES = depth_plan.figures(config, scenes_of)
 
 
 rule train_depth:

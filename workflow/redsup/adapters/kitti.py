@@ -23,12 +23,11 @@ from pathlib import Path
 
 import numpy as np
 
-from redsup import geometry
+from redsup import eval_frame, geometry
 from redsup.adapters.common import (AdapterError, SceneWriter, expect_size, image_size, list_frames, read_kv_file,
                                     rigid, translation)
 from redsup.adapters.frames2d import Frames2D
-from redsup.det3d import eval_frame
-from redsup.prep.boxes3d import points_in_box
+from redsup.boxes3d import points_in_box
 from redsup.sceneio import BOX_COLUMNS, LIDAR_RECORD_BYTES, frame_name, read_lidar
 
 FPS = 10.0
@@ -167,7 +166,7 @@ def label_to_row(label: dict, frame: int, track_id: int, T_vehicle_rect0: np.nda
     """A boxes.csv row: geometric centre and heading moved from rectified camera 0 to the vehicle frame.
 
     The vehicle-frame yaw is the heading whose projection back onto the camera's horizontal plane is the
-    label's (`redsup.det3d.eval_frame`): evaluation moves the box back upright into the camera frame and
+    label's (`redsup.eval_frame`): evaluation moves the box back upright into the camera frame and
     gets the label's own box, as the KITTI devkit uses it."""
     row = {c: float("nan") for c in BOX_COLUMNS}
     row.update(frame=frame, track_id=track_id, cls=label["cls"], occlusion=int(label["occlusion"]),

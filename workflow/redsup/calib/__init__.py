@@ -2,6 +2,7 @@
 
 Modules (pure functions; the per-frame geometry lives in ``redsup.depth.calibration``):
 
+- ``names``    names the others share: method names (``road_method``) and the Fig. 1 row labels
 - ``inputs``   one scene's raw network depth, LiDAR ground truth and road masks, brought to common resolutions
 - ``methods``  the scaling methods of ch. 5 Table 1 (per-frame GT median, single GT scale, fixed road plane,
                fitted road plane with length / width limits) and their evaluation with skipped-frame reasons

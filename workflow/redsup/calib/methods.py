@@ -32,7 +32,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from redsup.calib.inputs import SceneInputs, resize_depth
-from redsup.calib.plan import road_method  # noqa: F401  (re-exported)
+from redsup.calib.names import road_method  # noqa: F401  (re-exported)
 from redsup.depth import calibration, evaluation
 from redsup.prep.seeds import derive_seed
 

@@ -15,14 +15,11 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping, Sequence
 
+from redsup.calib.names import FIG1_GT_ROW, FIG1_OURS_ROW, FIG1_ROAD_ROW, FIG1_SINGLE_ROW, road_method
+
 METHOD_PATTERN = r"gt_median|single_train|single_test|fixed_plane|road_L[0-9.]+_W[0-9.]+"
 SERIES_PREFIX = "series_"
 VARY_INDEX = {"length": "Length (m)", "width": "Width (m)"}
-
-
-def road_method(length: float, width: float) -> str:
-    """``road_L<length>_W<width>`` (numbers as %g), e.g. ``road_L30_W3``."""
-    return f"road_L{float(length):g}_W{float(width):g}"
 
 
 def _method(name: str, cal: Mapping) -> str:
@@ -39,13 +36,6 @@ def table_methods(cal: Mapping) -> dict[str, list[tuple[str, str]]]:
             fixed = {"length": cal["length"], "width": cal["width"]}
             out[table] = [(f"{float(v):g}", road_method(**{**fixed, t["vary"]: v})) for v in t["values"]]
     return out
-
-
-# row labels of a series table (redsup.calib.report.fig1_table)
-FIG1_GT_ROW = "per-frame GT scaling factor"
-FIG1_SINGLE_ROW = "GT Single Scaling (training set)"
-FIG1_OURS_ROW = "Ours (road plane, per frame)"
-FIG1_ROAD_ROW = "GT scaling on the road-box pixels (diagnostic)"
 
 
 def series_rows() -> list[str]:

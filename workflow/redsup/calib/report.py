@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from redsup.calib.methods import per_frame
-from redsup.calib.plan import FIG1_GT_ROW, FIG1_OURS_ROW, FIG1_ROAD_ROW, FIG1_SINGLE_ROW  # noqa: F401
+from redsup.calib.names import FIG1_GT_ROW, FIG1_OURS_ROW, FIG1_ROAD_ROW, FIG1_SINGLE_ROW  # noqa: F401
 from redsup.depth.evaluation import METRICS
 
 COLUMNS = {"abs_rel": "Abs Rel", "sq_rel": "Sq Rel", "rmse": "RMSE", "rmse_log": "RMSE log", "a1": "δ < 1.25",

@@ -36,11 +36,12 @@ A class/difficulty without any valid ground truth gives NaN (the devkit divides 
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from redsup.det3d import boxes as box_ops
+from redsup.det3d.kitti_types import FrameDet, FrameGT
 
 DIFFICULTIES = ("easy", "moderate", "hard")
 MIN_HEIGHT = (40.0, 25.0, 25.0)
@@ -49,27 +50,6 @@ MAX_TRUNCATION = (0.15, 0.30, 0.50)
 N_SAMPLE_PTS = 41
 NEIGHBOUR_CLASS = {"car": "van", "pedestrian": "person_sitting"}
 METRICS = ("2d", "bev", "3d")
-
-
-@dataclass(frozen=True)
-class FrameGT:
-    """Ground truth of one frame: G objects, including DontCare rows (cls "DontCare")."""
-    boxes: np.ndarray        # (G, 7) x, y, z, l, w, h, yaw (vehicle frame); NaN rows allowed
-    bbox: np.ndarray         # (G, 4) x1, y1, x2, y2 image box in pixels
-    occlusion: np.ndarray    # (G,) KITTI level 0..3
-    truncation: np.ndarray   # (G,) 0..1
-    cls: np.ndarray          # (G,) class names, case-insensitive
-    alpha: np.ndarray | None = field(default=None)  # (G,) observation angle (label field 4, rad); for AOS
-
-
-@dataclass(frozen=True)
-class FrameDet:
-    """Detections of one frame: D boxes with a 2D image box and a score."""
-    boxes: np.ndarray        # (D, 7)
-    bbox: np.ndarray         # (D, 4)
-    score: np.ndarray        # (D,)
-    cls: np.ndarray | None = field(default=None)   # (D,) class names; None = all "Car"
-    alpha: np.ndarray | None = field(default=None)  # (D,) observation angle (rad); None or any -10: no AOS
 
 
 def thresholds(scores: np.ndarray, n_gt: int, n_sample_pts: int = N_SAMPLE_PTS) -> np.ndarray:

@@ -2,7 +2,7 @@
 
 One `<frame>.txt` per frame, one object per line, 15 fields (ground truth) or 16 (detections, the score
 last): type truncated occluded alpha x1 y1 x2 y2 h w l x y z rotation_y [score], location = bottom centre
-in the rectified camera 0 frame. Boxes go to the evaluation frame of `redsup.det3d.eval_frame` (the
+in the rectified camera 0 frame. Boxes go to the evaluation frame of `redsup.eval_frame` (the
 devkit's geometry). With a calibration folder (`calib/<frame>.txt` of the object benchmark), every box
 first takes the workflow's own route: `adapters.kitti.label_to_row` into the vehicle (IMU) frame and
 `eval_frame.to_eval_frame` back, so the result shows that the workflow's path equals the devkit.
@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 
-from redsup.det3d import eval_frame
-from redsup.det3d.kitti_eval import FrameDet, FrameGT
+from redsup import eval_frame
+from redsup.det3d.kitti_types import FrameDet, FrameGT
 
 FIELDS = ("truncation", "occlusion", "alpha", "x1", "y1", "x2", "y2", "h", "w", "l", "cx", "cy", "cz", "ry")
 

@@ -13,7 +13,7 @@ from dataclasses import replace
 
 import numpy as np
 
-from redsup.det3d.kitti_eval import FrameDet, FrameGT
+from redsup.det3d.kitti_types import FrameDet, FrameGT
 
 KITTI_FOCAL_PX = 721.5377   # f_x = f_y of KITTI object's P2 (left colour camera)
 

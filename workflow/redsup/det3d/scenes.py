@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from redsup import geometry, sceneio
-from redsup.det3d.kitti_eval import FrameGT
+from redsup.det3d.kitti_types import FrameGT
 from redsup.prep import masks_io
 
 if TYPE_CHECKING:   # pandas only types the rows (read by sceneio.read_boxes): 0.4 s of start-up in every job

@@ -15,4 +15,5 @@ Small modules, pure functions where possible (no I/O except `data`):
 - `postprocess`: heatmap peaks, box decoding, rotated BEV NMS, camera-view filtering and 2D boxes.
 - `train`: the training loop (curves through a callback) and `evaluate`: inference + KITTI AP.
 - `tables`: the three tables of ch. 7 from the per-configuration metrics.
+- `plan`: the stage's jobs and tables as data; `names`: the run-id prefix `plan` and `tables` share.
 """

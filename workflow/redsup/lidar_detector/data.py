@@ -12,7 +12,7 @@ The cache (`save_split` / `load_split`) is one npz per split:
 
 | key | content |
 |---|---|
-| `scenes` (S,) | scene ids; `cam_K` (S, 3, 3), `cam_T` (S, 4, 4) T_camera_vehicle, `cam_size` (S, 2) (W, H); `eval_T` (S, 4, 4) T_eval_vehicle (`redsup.det3d.eval_frame`; identity: vehicle frame) |
+| `scenes` (S,) | scene ids; `cam_K` (S, 3, 3), `cam_T` (S, 4, 4) T_camera_vehicle, `cam_size` (S, 2) (W, H); `eval_T` (S, 4, 4) T_eval_vehicle (`redsup.eval_frame`; identity: vehicle frame) |
 | `frame_scene`, `frame_index` (F,) | scene of each frame and its index in the scene |
 | `points` (P, 4), `point_offsets` (F + 1,) | FOV-cropped sweep of frame f: points[offsets[f]:offsets[f + 1]], vehicle frame x, y, z, reflectance |
 | `obj_frame`, `obj_score` (O,), `obj_points` (Q, 3), `obj_offsets` (O + 1,) | kept masks and their finite L_m points (vehicle frame) |
@@ -27,10 +27,9 @@ from pathlib import Path
 
 import numpy as np
 
-from redsup import geometry, sceneio
+from redsup import eval_frame, geometry, sceneio
 from redsup.det3d import scenes as det_scenes
-from redsup.det3d import eval_frame
-from redsup.det3d.kitti_eval import FrameGT
+from redsup.det3d.kitti_types import FrameGT
 from redsup.fileio import save_npz_atomic
 
 MIN_DEPTH = 0.1
@@ -237,7 +236,7 @@ class SplitData:
         return self.arrays["cam_K"][s], self.arrays["cam_T"][s], (int(w), int(h))
 
     def eval_transform(self, f: int) -> np.ndarray | None:
-        """T_eval_vehicle of frame f's scene (KITTI: upright rect0, `redsup.det3d.eval_frame`), or None."""
+        """T_eval_vehicle of frame f's scene (KITTI: upright rect0, `redsup.eval_frame`), or None."""
         if "eval_T" not in self.arrays:
             return None
         T = self.arrays["eval_T"][int(self.arrays["frame_scene"][f])]

@@ -15,9 +15,10 @@ import time
 import numpy as np
 import torch
 
-from redsup.det3d import eval_frame, kitti_eval
-from redsup.det3d.kitti_eval import FrameDet, FrameGT
+from redsup import eval_frame
+from redsup.det3d import kitti_eval
 from redsup.det3d.kitti_pixels import kitti_pixel_scale, scale_frames
+from redsup.det3d.kitti_types import FrameDet, FrameGT
 from redsup.lidar_detector.data import SplitData
 from redsup.lidar_detector.grid import GridSpec
 from redsup.lidar_detector.model import CenterDetector

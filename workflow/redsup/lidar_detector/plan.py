@@ -19,10 +19,10 @@ from collections.abc import Mapping
 
 from redsup.tables.contract import parse_run, run_id, training_seed  # noqa: F401 (part of this plan)
 
+from redsup.lidar_detector.names import LIFTING
 from redsup.lifting import plan as lifting_plan
 
 SPLIT_PREFIXES = {"train": ("train_", "long_"), "val": ("val_",), "test": ("test_",)}   # val: knobs (benchmarks)
-LIFTING = "lifting:"          # prefix of the ch. 6 runs a table row reads
 
 
 def split_scenes(scenes: list[str], split: str) -> list[str]:

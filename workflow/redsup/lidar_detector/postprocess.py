@@ -16,7 +16,7 @@ import torch
 import torch.nn.functional as F
 
 from redsup.det3d.boxes import bev_iou, boxes_to_image_bbox
-from redsup.det3d.kitti_eval import FrameDet
+from redsup.det3d.kitti_types import FrameDet
 from redsup.det3d.losses import yaw_bin_centers
 from redsup.det3d.voting import BevGrid
 

@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from redsup.det3d.kitti_eval import DIFFICULTIES
-from redsup.lidar_detector.plan import LIFTING
+from redsup.lidar_detector.names import LIFTING
 from redsup.tables.contract import TableFrame
 from redsup.tables.noise import replicates, with_sampling
 from redsup.tables.noise import seeds as seed_record

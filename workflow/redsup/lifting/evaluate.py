@@ -3,7 +3,7 @@
 Ground truth = `gt/boxes.csv` of every frame of the scenes (`redsup.det3d.scenes.gt_frames`); 2D boxes of
 ground truth and detections are scaled to KITTI-camera pixels (`redsup.det3d.kitti_pixels`) so that the
 easy / moderate / hard height cuts mean what they mean on KITTI. 3D boxes of KITTI scenes are evaluated
-upright in the rectified camera frame, as the devkit (`redsup.det3d.eval_frame`). Detections that could not be lifted
+upright in the rectified camera frame, as the devkit (`redsup.eval_frame`). Detections that could not be lifted
 (no or too few LiDAR points) are simply absent (a miss if they were a car).
 
 Returns `kitti_eval.evaluate`'s flat dict, e.g. `Car_bev_0.5/moderate_R40`, `Car_3d_0.7/easy_R11`, plus
@@ -16,10 +16,10 @@ from pathlib import Path
 import numpy as np
 
 from redsup import sceneio
-from redsup.det3d.eval_frame import frames_to_eval, scene_eval_transform
 from redsup.det3d.kitti_eval import DIFFICULTIES, MAX_OCCLUSION, MAX_TRUNCATION, MIN_HEIGHT, bootstrap_ap, evaluate
 from redsup.det3d.kitti_pixels import kitti_pixel_scale, scale_frames
 from redsup.det3d.scenes import gt_frames
+from redsup.eval_frame import frames_to_eval, scene_eval_transform
 from redsup.lifting.data import ObjectTable
 from redsup.lifting.postprocess import frame_detections
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from redsup.det3d.kitti_eval import FrameDet
+from redsup.det3d.kitti_types import FrameDet
 from redsup.lifting.data import ObjectTable
 from redsup.lifting.frames import to_vehicle, wrap_angle
 

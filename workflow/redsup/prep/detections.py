@@ -20,9 +20,9 @@ import numpy as np
 from tqdm import tqdm
 
 from redsup import geometry, sceneio
+from redsup.boxes3d import projected_box_area
 from redsup.fileio import save_npz_atomic
 from redsup.prep import masks_io
-from redsup.prep.boxes3d import projected_box_area
 from redsup.prep.detector import (KIND_FALSE_POSITIVE, KIND_MERGED, KIND_SINGLE, SILHOUETTE_FILL, match_to_gt,
                                   simulate_frame)
 from redsup.prep.points import FramePoints, gt_inlier_flags, mask_pixel_box, pixel_box_to_xyxy, read_sweep

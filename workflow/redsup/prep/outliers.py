@@ -21,9 +21,9 @@ from pathlib import Path
 import numpy as np
 
 from redsup import geometry, sceneio
-from redsup.det3d.eval_frame import scene_eval_transform, to_eval_frame
+from redsup.boxes3d import distance_to_box, points_in_box
+from redsup.eval_frame import scene_eval_transform, to_eval_frame
 from redsup.prep import masks_io
-from redsup.prep.boxes3d import distance_to_box, points_in_box
 from redsup.prep.detections import BOX_FIELDS, LIDAR, SceneContext
 from redsup.prep.points import project_sweep, read_sweep
 

@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from redsup import geometry, sceneio
-from redsup.prep.boxes3d import points_in_box
+from redsup.boxes3d import points_in_box
 
 
 def read_sweep(path: str | Path) -> tuple[np.ndarray, int]:
