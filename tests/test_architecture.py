@@ -76,7 +76,7 @@ def import_edges(package: Path) -> dict[tuple[str, str], list[int]]:
                 if target != root and not target.startswith(root + "."):
                     continue
                 module = _resolve(target, modules)
-                if module is not None and module != name:
+                if module is not None and module != name and node.lineno not in edges[(name, module)]:
                     edges[(name, module)].append(node.lineno)
     return dict(edges)
 
