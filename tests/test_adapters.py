@@ -13,8 +13,11 @@ from redsup import config, sceneio
 from redsup.adapters import AdapterError, adapt_scene, cameras, rle, scene_ids
 from redsup.adapters.scene_folder import focal_from_lens
 from redsup.adapters.tusimple import adapt_clips, read_calibration
+from redsup.prep import masks_io
 from redsup.prep.depthmap import lidar_depth_maps
 from redsup.prep.detections import detect_scene
+from redsup.prep.detector import KIND_FALSE_POSITIVE, KIND_SINGLE
+from redsup.prep.outliers import scene_records
 
 CONFIG = Path(__file__).resolve().parents[1] / "config.yaml"
 NO_CROP = {"top": 0, "bottom": 0, "left": 0, "right": 0}
@@ -252,7 +255,10 @@ def test_coco_detections_become_instances(tmp_path):
     # the car detection takes the label's id 1; the unmatched one (a false positive) is kept with a new id
     records = json.loads((out / "gt" / "detections" / "cam_front" / "000000.json").read_text())
     fp_id = records[1]["track_id"]                           # first id after the frame's labels
-    assert records == [{"track_id": 1, "score": 0.9, "cls": "car"}, {"track_id": fp_id, "score": 0.8, "cls": "car"}]
+    assert [{k: r[k] for k in ("track_id", "score", "cls")} for r in records] == [
+        {"track_id": 1, "score": 0.9, "cls": "car"}, {"track_id": fp_id, "score": 0.8, "cls": "car"}]
+    assert np.array_equal(rle.decode(records[0]["segmentation"]), mask)
+    assert np.array_equal(rle.decode(records[1]["segmentation"]), other)
     assert np.array_equal(inst == 1, mask) and np.array_equal(inst == fp_id, other) and fp_id > 1
     assert summary["detections_kept"] == 2 and summary["detections_unmatched"] == 1
     # preparation: the supplied detections enter as they are (no stand-in noise), the false positive with its score
@@ -266,6 +272,88 @@ def test_coco_detections_become_instances(tmp_path):
     det_file.write_text(json.dumps(bad))
     with pytest.raises(AdapterError, match=r"000007.json: entry 0: mask size \[21, 40\]"):
         adapt_scene("ko", spec, "train_000007", out)
+
+
+def covered_car_scene(tmp_path, seg_of_car=None):
+    """The KITTI object fixture with two supplied detections: the car's (score 0.55, its label's pixels: rows 7..14,
+    columns 19..25, 56 px) wholly under a false positive (0.70, rows 5..16, columns 15..30, 192 px). Mask boxes
+    against the label box 18.4..25.6 x 6.1..14.9 (63.36 px^2): the car's 18.5..25.5 x 6.5..14.5 has IoU
+    56 / 63.36 = 0.88, the false positive's 14.5..30.5 x 4.5..16.5 has 63.36 / 192 = 0.33 < match_iou 0.5."""
+    root = tmp_path / "obj"
+    kitti_object_fixture(root)
+    car = np.zeros((H, W), bool)
+    car[7:15, 19:26] = True
+    fp = np.zeros((H, W), bool)
+    fp[5:17, 15:31] = True
+    det_file = tmp_path / "dets" / "training" / "image_2" / "000007.json"
+    det_file.parent.mkdir(parents=True)
+    det_file.write_text(json.dumps([
+        {"category_id": 3, "score": 0.55, "segmentation": rle.encode(car) if seg_of_car is None else seg_of_car},
+        {"category_id": 3, "score": 0.70, "segmentation": rle.encode(fp)}]))
+    spec = {"kind": "kitti_object", "path": str(root), "crop": NO_CROP, "resize": RESIZE,
+            "instances": {"source": "detections", "path": str(tmp_path / "dets")}}
+    return spec, det_file, car, fp
+
+
+def test_detection_covered_by_a_better_one_reaches_the_detections(tmp_path):
+    spec, _, car, fp = covered_car_scene(tmp_path)
+    out = tmp_path / "ko" / "train_000007"
+    summary = adapt_scene("ko", spec, "train_000007", out)
+    assert summary["detections_kept"] == 2 and summary["detections_unmatched"] == 1
+    # ids: the car label 1, DontCare 2, the false positive 3. The composite has no pixel of the car left: counted
+    inst = sceneio.read_label_png(out / "gt" / "instance" / "cam_front" / "000000.png")
+    assert set(np.unique(inst)) == {0, 3} and np.array_equal(inst == 3, fp)
+    assert summary["detections_hidden_in_instance_image"] == 1
+    records = json.loads((out / "gt" / "detections" / "cam_front" / "000000.json").read_text())
+    assert [(r["track_id"], r["score"]) for r in records] == [(3, 0.70), (1, 0.55)]
+    assert [int(rle.decode(r["segmentation"]).sum()) for r in records] == [192, 56]
+    # both reach detections_<level>.npz, each with its whole mask; the car keeps its label's id
+    cfg = config.load(CONFIG)["detection"]
+    arrays, numbers = detect_scene(out, cfg, next(iter(cfg["levels"])), seed=0)
+    assert arrays["score"].tolist() == pytest.approx([0.70, 0.55])
+    assert np.array_equal(masks_io.mask_of(arrays, 0), fp) and np.array_equal(masks_io.mask_of(arrays, 1), car)
+    assert arrays["matched_track"].tolist() == [-1, 1] and arrays["iou_gt"].tolist() == [0.0, 1.0]
+    assert arrays["kind"].tolist() == [KIND_FALSE_POSITIVE, KIND_SINGLE]
+    assert numbers["n_detections"] == 2 and numbers["n_false_positive"] == 1
+    # the car's two LiDAR returns project to pixels (20, 9) and (21, 10), inside both masks; the third to (9, 9)
+    assert masks_io.n_points(arrays).tolist() == [2, 2]
+    # the in-mask outlier analysis measures the car's own mask too, not its (empty) share of the composite
+    rec = [r for r in scene_records(out, "cam_front") if r["track"] == 1]
+    assert len(rec) == 1 and (rec[0]["n_mask"], rec[0]["out_mask"]) == (2, 0)
+
+
+@pytest.mark.parametrize("seg, problem", [
+    ({"size": [H, W], "counts": "S<8<~"}, "entry 0: compressed RLE has a character outside"),
+    ({"size": [H, W], "counts": ["a", 3]}, "entry 0: RLE counts must be a string or a list of run lengths"),
+    ({"size": [H, W], "counts": [5, 10, W * H - 16]}, f"entry 0: RLE run lengths sum to {W * H - 1}"),
+    (7, "entry 0: segmentation must be an RLE dict or polygon list"),
+], ids=["bad-character", "counts-not-numbers", "one-pixel-short", "not-a-mask"])
+def test_malformed_supplied_mask_names_the_file(tmp_path, seg, problem):
+    spec, det_file, _, _ = covered_car_scene(tmp_path, seg_of_car=seg)
+    with pytest.raises(AdapterError, match=problem) as err:
+        adapt_scene("ko", spec, "train_000007", tmp_path / "ko" / "train_000007")
+    assert str(det_file) in str(err.value)
+
+
+@pytest.mark.parametrize("text, problem", [
+    ('[{"track_id": 1, "score": 0.55', "not valid JSON"),
+    ('{"track_id": 1}', "expected a list of detections"),
+    ('[{"track_id": 1, "score": 0.55, "cls": "car"}]', "detection 0 needs track_id, score, cls and segmentation"),
+    (json.dumps([{"track_id": 1, "score": 0.55, "cls": "car", "segmentation": rle.encode(np.ones((H + 1, W), bool))}]),
+     f"detection 0: mask is {W}x{H + 1}, the image {W}x{H}"),
+    (json.dumps([{"track_id": 1, "score": 0.55, "cls": "car", "segmentation": {"size": [H, W], "counts": [3]}}]),
+     f"detection 0: RLE run lengths sum to 3, but size {H}x{W}"),
+], ids=["truncated-json", "not-a-list", "no-mask", "wrong-size", "runs-short"])
+def test_malformed_detection_records_name_the_file(tmp_path, text, problem):
+    spec, _, _, _ = covered_car_scene(tmp_path)
+    out = tmp_path / "ko" / "train_000007"
+    adapt_scene("ko", spec, "train_000007", out)
+    records = out / "gt" / "detections" / "cam_front" / "000000.json"
+    records.write_text(text)
+    cfg = config.load(CONFIG)["detection"]
+    with pytest.raises(sceneio.SceneError, match=problem) as err:
+        detect_scene(out, cfg, next(iter(cfg["levels"])), seed=0)
+    assert str(records) in str(err.value)
 
 
 def test_detections_on_unlabelled_raw_frames_add_rows(tmp_path):

@@ -29,13 +29,16 @@ class Frames2D:
     instances.source: `detections` (COCO-result JSON per image under instances.path), `label_boxes`
     (pseudo-masks: the labelled 2D boxes filled, KITTI object only), `none` (all 0). road.path: Cityscapes
     label-id PNGs per image, else all 0 (no class). Detections of unlabelled scenes add boxes.csv rows.
+    Detections also go to gt/detections/<camera>/NNNNNN.json with their own masks; `stats` counts those
+    the composite instance image hides entirely (`detections_hidden_in_instance_image`).
     """
 
     def __init__(self, spec: dict, dataset_root: str | Path):
         self.inst = instance_settings(spec)
         self.road = (spec.get("road") or {}).get("path")
         self.root = Path(dataset_root)
-        self.stats = {"detections_kept": 0, "detections_unmatched": 0, "semantic_frames": 0}
+        self.stats = {"detections_kept": 0, "detections_unmatched": 0, "detections_hidden_in_instance_image": 0,
+                      "semantic_frames": 0}
 
     def write(self, writer: SceneWriter, camera: str, frame: int, image_path: Path, size: tuple[int, int],
               labels: list[dict] | None, labelled: bool) -> list[dict]:
@@ -53,6 +56,8 @@ class Frames2D:
                 first_id=1 + max([int(r["track_id"]) for r in (labels or [])] + [0]))
             self.stats["detections_kept"] += len(dets)
             self.stats["detections_unmatched"] += unmatched
+            self.stats["detections_hidden_in_instance_image"] += masks.hidden_instances(
+                instance, [r["track_id"] for r in records])
             writer.write_json(f"gt/detections/{camera}/{frame_name(frame, 'json')}", records)
             for r in added:
                 row = empty_box_row(frame, r["track_id"], r["cls"])

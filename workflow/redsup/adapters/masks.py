@@ -8,6 +8,11 @@ A detection file is the list Detectron2 / MMDetection write in COCO result forma
 ``[{"category_id": int, "score": float, "segmentation": RLE or polygons, "bbox": [x, y, w, h], ...}]``
 (`image_id` is ignored: the file name says which image). Masks are COCO RLE (compressed string or
 counts list, `redsup.adapters.rle`) or polygon lists; their size must be the image size.
+
+The scene keeps every detection's own mask: `gt/detections/<camera>/<frame>.json` lists each kept detection
+with its mask as a compressed COCO RLE, and the detection stage reads the masks from there. `gt/instance` is
+only the composite (one id per pixel, the better detection owning an overlap), so a detection fully covered
+by a better one has no pixel in it; the adapter counts those (`detections_hidden_in_instance_image`).
 """
 from __future__ import annotations
 
@@ -95,8 +100,10 @@ def instances_from_detections(detections: list[dict], size: tuple[int, int], lab
     greedy in score order). A detection matching no label (a false positive) is kept with a new id
     (from `first_id`) but adds no row (it is no ground truth). Without labels every detection gets a new id
     and a new row with its class and mask box (3D fields unknown). No detection is dropped: filtering by the labels would put ground truth into the
-    detections. The records [{track_id, score, cls}] keep every detection's own score.
-    Masks are painted lowest score first, so the better detection owns overlapping pixels.
+    detections. The records [{track_id, score, cls, segmentation}], best first, keep every detection's own
+    score and own mask (compressed COCO RLE). The instance image is their composite: masks are painted lowest
+    score first, so the better detection owns overlapping pixels, and one fully covered by a better one has no
+    pixel in it (`hidden_instances` counts those); its record still has its whole mask.
     """
     width, height = size
     instance = np.zeros((height, width), dtype=np.uint16)
@@ -127,8 +134,14 @@ def instances_from_detections(detections: list[dict], size: tuple[int, int], lab
         next_id += 1
     for track, det in sorted(assigned, key=lambda a: a[1]["score"]):
         instance[det["mask"]] = track
-    records = [{"track_id": int(t), "score": float(d["score"]), "cls": d["cls"]} for t, d in assigned]
+    records = [{"track_id": int(t), "score": float(d["score"]), "cls": d["cls"],
+                "segmentation": rle.encode(d["mask"])} for t, d in assigned]
     return instance, new_rows, dropped, records
+
+
+def hidden_instances(instance: np.ndarray, track_ids) -> int:
+    """How many of `track_ids` have no pixel in the instance image (covered by better detections)."""
+    return len(set(int(t) for t in track_ids) - set(np.unique(instance).tolist()))
 
 
 def instances_from_boxes(labels: list[dict], size: tuple[int, int]) -> np.ndarray:

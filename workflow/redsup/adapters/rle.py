@@ -70,7 +70,12 @@ def decode(rle: dict) -> np.ndarray:
         counts = counts.decode("ascii")
     if isinstance(counts, str):
         counts = string_to_counts(counts)
-    counts = np.asarray(counts, dtype=np.int64)
+    try:
+        counts = np.asarray(counts, dtype=np.int64)
+    except (TypeError, ValueError):
+        counts = None
+    if counts is None or counts.ndim != 1:
+        raise RLEError(f"RLE counts must be a string or a list of run lengths, got {str(rle['counts'])[:40]}")
     if (counts < 0).any():
         raise RLEError("an RLE has a negative run length")
     if counts.sum() != h * w:

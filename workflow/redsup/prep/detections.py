@@ -8,11 +8,11 @@ Arrays (D detections, P mask points, Q box points):
   int8 (0 single, 1 merged neighbours, 2 false positive), points (P, 4) float32 L_m in the LiDAR frame,
   point_offsets (D+1,) int64, point_inlier_gt (P,) bool, box_points (Q, 4), box_point_offsets (D+1,),
   box_point_inlier_gt (Q,) bool, lidar_nonfinite (T,) int32 records dropped per sweep, level, camera.
-Read them with `redsup.prep.masks_io` (load_detections, mask_of, points_of, ...).
+Read them with `redsup.prep.masks_io` (load_detections, mask_of, points_of, ...). A real scene with supplied
+detections (scene.json `detections_supplied`) takes them, each with its own mask, from
+gt/detections/<camera>/<frame>.json instead of the stand-in detector.
 """
 from __future__ import annotations
-
-import json
 
 from pathlib import Path
 
@@ -20,6 +20,7 @@ import numpy as np
 from tqdm import tqdm
 
 from redsup import geometry, sceneio
+from redsup.adapters import rle
 from redsup.boxes3d import projected_box_area
 from redsup.fileio import save_npz_atomic
 from redsup.prep import masks_io
@@ -59,6 +60,11 @@ class SceneContext:
         """Frames of LiDAR and camera are simultaneous: both use ego pose `frame`."""
         return geometry.lidar_to_camera(self.T_vehicle_lidar, self.poses[frame], self.poses[frame],
                                         self.T_vehicle_camera)
+
+    def tracks(self, frame: int) -> set[int]:
+        """Track ids of the frame's ground-truth cars (boxes.csv rows of the wanted classes)."""
+        rows = self.gt.get(frame)
+        return set() if rows is None else {int(t) for t in rows["track_id"]}
 
     def gt_box(self, frame: int, track: int):
         rows = self.gt.get(frame)
@@ -104,21 +110,42 @@ def _label(ctx: SceneContext, kind: str, camera: str, frame: int, required: bool
     return image
 
 
-def supplied_frame(scene_dir: Path, camera: str, frame: int, instance: np.ndarray) -> list[dict]:
-    """Detections a user supplied for a real frame (written by the adapter: gt/detections/<camera>/<frame>.json,
-    one {track_id, score, cls} per detection, masks = its pixels of the instance image), unmatched ones
-    (false positives) included; kind: single, or false positive when it took no label's id."""
+def supplied_records(scene_dir: str | Path, camera: str, frame: int, size: tuple[int, int]) -> list[dict]:
+    """The detections a user supplied for one frame of a real scene, as the adapter wrote them to
+    gt/detections/<camera>/<frame>.json ({track_id, score, cls, segmentation: COCO RLE of the detection's own
+    mask} each): [{track_id, score, cls, mask (H, W) bool}]. Every detection keeps its whole mask, also where
+    the composite gt/instance image gave its pixels to a better one. SceneError naming the file for a
+    missing or malformed file or a mask whose size is not the image's (W, H) = `size`."""
     path = Path(scene_dir) / "gt" / "detections" / camera / sceneio.frame_name(frame, "json")
-    try:
-        records = json.loads(path.read_text())
-    except FileNotFoundError as exc:
-        raise sceneio.SceneError(f"{path}: supplied detections missing (scene.json says detections_supplied)") from exc
+    records = sceneio.read_json(path, "supplied detections missing (scene.json says detections_supplied)")
+    if not isinstance(records, list):
+        raise sceneio.SceneError(f"{path}: expected a list of detections (track_id, score, cls, segmentation)")
+    width, height = size
     out = []
-    for r in records:
-        mask = instance == int(r["track_id"])
-        if mask.any():                     # a detection fully covered by a better one has no pixel left
-            out.append({"mask": mask, "score": float(r["score"]), "kind": KIND_SINGLE})
+    for k, r in enumerate(records):
+        try:
+            record = {"track_id": int(r["track_id"]), "score": float(r["score"]), "cls": str(r["cls"]),
+                      "mask": rle.decode(r["segmentation"])}
+        except rle.RLEError as exc:
+            raise sceneio.SceneError(f"{path}: detection {k}: {exc}") from exc
+        except (KeyError, TypeError, ValueError) as exc:
+            raise sceneio.SceneError(f"{path}: detection {k} needs track_id, score, cls and segmentation (a COCO "
+                                     f"RLE of its mask; adapted before masks were kept per detection? run "
+                                     f"adapt_scene again): {exc}") from exc
+        if record["mask"].shape != (height, width):
+            raise sceneio.SceneError(f"{path}: detection {k}: mask is {record['mask'].shape[1]}x"
+                                     f"{record['mask'].shape[0]}, the image {width}x{height}")
+        out.append(record)
     return out
+
+
+def supplied_frame(records: list[dict], gt_tracks: set[int]) -> list[dict]:
+    """Detections of `supplied_records` as detect_scene takes them: {mask, score, kind, match}, unmatched ones
+    (false positives) included. The adapter matched them to the labels: a detection whose id is a ground-truth
+    car's (`gt_tracks`) matches it with IoU 1 (its mask is that car's mask), any other is a false positive."""
+    return [{"mask": r["mask"], "score": r["score"],
+             "kind": KIND_SINGLE if r["track_id"] in gt_tracks else KIND_FALSE_POSITIVE,
+             "match": (r["track_id"], 1.0) if r["track_id"] in gt_tracks else (-1, 0.0)} for r in records]
 
 
 def detect_scene(scene_dir: str | Path, detection_cfg: dict, level: str, seed: int) -> tuple[dict, dict]:
@@ -139,7 +166,7 @@ def detect_scene(scene_dir: str | Path, detection_cfg: dict, level: str, seed: i
         semantic = _label(ctx, "semantic", camera, i, required=False)
         objects = ctx.objects(i, instance)
         if supplied:                       # real data: the user's detections as they are, scores included
-            dets, counts = supplied_frame(ctx.dir, camera, i, instance), {}
+            dets, counts = supplied_frame(supplied_records(ctx.dir, camera, i, ctx.size), ctx.tracks(i)), {}
         else:                              # embedded world: the stand-in detector's noise model
             rng = np.random.default_rng(np.random.SeedSequence([int(seed), i]))
             dets, counts = simulate_frame(instance, semantic, objects, settings, rng, scale)
@@ -153,7 +180,8 @@ def detect_scene(scene_dir: str | Path, detection_cfg: dict, level: str, seed: i
         tracks = {o["track"] for o in objects}
         found = set()
         for d in keep:
-            track, iou = match_to_gt(d["mask"], instance, tracks, detection_cfg["match_iou"])
+            track, iou = (d["match"] if supplied
+                          else match_to_gt(d["mask"], instance, tracks, detection_cfg["match_iou"]))
             found.add(track)
             box_px = mask_pixel_box(d["mask"])
             gt_box = ctx.gt_box(i, track)

@@ -24,7 +24,7 @@ from redsup import geometry, sceneio
 from redsup.boxes3d import distance_to_box, points_in_box
 from redsup.eval_frame import scene_eval_transform, to_eval_frame
 from redsup.prep import masks_io
-from redsup.prep.detections import BOX_FIELDS, LIDAR, SceneContext
+from redsup.prep.detections import BOX_FIELDS, LIDAR, SceneContext, supplied_records
 from redsup.prep.points import project_sweep, read_sweep
 
 MASK_SOURCES = (None, "detections")
@@ -45,6 +45,21 @@ def outlier_counts(inside: np.ndarray, selected: np.ndarray) -> tuple[int, int]:
     return int(selected.sum()), int((selected & ~inside).sum())
 
 
+def car_masks(ctx: SceneContext, camera: str, frame: int, tracks, supplied: bool) -> dict[int, np.ndarray] | None:
+    """track id -> (H, W) bool mask of each of `tracks` in one frame (all False where it has none): the supplied
+    detections' own masks (`supplied`: whole, also where a better detection covers them in the composite
+    gt/instance image), else the instance image's pixels of that id; None where the frame has no instance image."""
+    height, width = ctx.size[1], ctx.size[0]
+    if supplied:
+        own = {r["track_id"]: r["mask"] for r in supplied_records(ctx.dir, camera, frame, ctx.size)}
+        return {int(t): own.get(int(t), np.zeros((height, width), dtype=bool)) for t in tracks}
+    path = ctx.dir / "gt" / "instance" / camera / sceneio.frame_name(frame, "png")
+    if not path.exists():
+        return None
+    instance = sceneio.read_label_png(path)
+    return {int(t): instance == int(t) for t in tracks}
+
+
 def scene_records(scene_dir: str | Path, camera: str, classes=("car",), *, min_depth: float = 0.1,
                   margin: float = 0.2, use_masks: bool | None = None, keep_points: bool = False) -> list[dict]:
     """One record per ground-truth car with a 2D box in any frame of a scene: {scene, frame, track, distance,
@@ -56,6 +71,7 @@ def scene_records(scene_dir: str | Path, camera: str, classes=("car",), *, min_d
     meta = sceneio.read_meta(ctx.dir)
     if use_masks is None:
         use_masks = meta.get("instances") in MASK_SOURCES
+    supplied = bool(meta.get("detections_supplied"))
     T_eval = scene_eval_transform(ctx.dir)
     sweeps = sceneio.sensor_frames(ctx.dir, LIDAR, "bin", ctx.n_frames)
     out = []
@@ -68,10 +84,7 @@ def scene_records(scene_dir: str | Path, camera: str, classes=("car",), *, min_d
         seen = sweep[index]
         vehicle = geometry.transform_points(ctx.T_vehicle_lidar, seen[:, :3].astype(np.float64))
         frame_pts = vehicle if T_eval is None else geometry.transform_points(T_eval, vehicle)
-        instance = None
-        if use_masks:
-            path = ctx.dir / "gt" / "instance" / camera / sceneio.frame_name(i, "png")
-            instance = sceneio.read_label_png(path) if path.exists() else None
+        masks = car_masks(ctx, camera, i, rows["track_id"], supplied) if use_masks else None
         for _, row in rows.iterrows():
             rect = pixel_rect(row)
             if rect is None:
@@ -87,7 +100,7 @@ def scene_records(scene_dir: str | Path, camera: str, classes=("car",), *, min_d
                    "distance": float(np.hypot(row["x"], row["y"])), "occlusion": int(row["occlusion"]),
                    "n_box": n_box, "out_box": out_box, "n_top": n_top, "out_top": out_top,
                    "excess_box": [float(e) for e in excess], "n_mask": None, "out_mask": None}
-            in_mask = None if instance is None else instance[v, u] == int(row["track_id"])
+            in_mask = None if masks is None else masks[int(row["track_id"])][v, u]
             if in_mask is not None:
                 rec["n_mask"], rec["out_mask"] = outlier_counts(inside, in_mask)
             if keep_points:
