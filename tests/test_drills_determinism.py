@@ -2,6 +2,8 @@
 scratch and must write the tables an uninterrupted run writes, byte for byte, so each training function
 called twice with the same seed and thread count must give bit-identical weights (and losses), and a
 different seed must not (the comparison can fail)."""
+import os
+
 import numpy as np
 import pytest
 import torch
@@ -20,10 +22,12 @@ def weights_bytes(modules) -> bytes:
 
 
 @pytest.fixture
-def threads():
+def threads(monkeypatch):
     """One thread, as every tiny-profile training job (two would also be deterministic, but spin badly on a
     loaded 2-core machine)."""
     before = torch.get_num_threads(), torch.are_deterministic_algorithms_enabled()
+    for name in determinism.THREAD_VARIABLES:      # configure sets them for child processes: undone afterwards
+        monkeypatch.setenv(name, os.environ.get(name, ""))
     determinism.configure(1)
     yield 1
     torch.set_num_threads(before[0])
@@ -64,12 +68,15 @@ def test_velocity_mlp_training_twice_gives_identical_bits(threads):
     assert other[0] != first[0]
 
 
-def test_configure_sets_the_thread_count_and_deterministic_algorithms():
+def test_configure_sets_the_thread_count_and_deterministic_algorithms(monkeypatch):
     before = torch.get_num_threads(), torch.are_deterministic_algorithms_enabled()
+    for name in determinism.THREAD_VARIABLES:
+        monkeypatch.setenv(name, "2")
     try:
         torch.use_deterministic_algorithms(False)
         determinism.configure(1)
         assert torch.get_num_threads() == 1
+        assert {os.environ[name] for name in determinism.THREAD_VARIABLES} == {"1"}
         assert torch.are_deterministic_algorithms_enabled()
         with pytest.raises(ValueError, match="threads must be a positive integer"):
             determinism.configure(0)

@@ -1,22 +1,46 @@
-"""Same seed -> same bits on CPU: what a training or inference job sets before it touches torch.
+"""Same seed -> same bits on CPU: what a training or inference job sets before it touches numpy or torch.
 
-A job's result depends on its thread count (a reduction split over n threads sums in another order), so
-every job runs with the rule's `threads:` (the tiny profile fixes them at 1; Snakemake lowers a rule's
-threads to `--cores` only when it has fewer, so the count does not follow `--cores` otherwise), and on
-deterministic kernels (`torch.use_deterministic_algorithms`, warning instead of failing for the rare op
-without one). Seeds are the caller's (`torch.manual_seed(seed)` before building and training). Tested by
-tests/test_drills_determinism.py (each training function twice gives identical weights) and, end to end,
-by drills/drill_kill_resume.py and drill_parallel.py (byte-identical tables).
+A job's result depends on its thread count (a reduction split over n threads sums in another order), so every
+job that runs a network takes its torch and BLAS threads from the configuration (``jobs.compute_threads`` of
+the size profile), never from the executor: Snakemake hands a job the rule's threads, lowered to ``--cores``
+locally and replaced by ``--set-threads`` or a cluster profile, and exports them as ``OMP_NUM_THREADS`` and
+friends. ``configure`` runs first in each such script (before numpy and torch load: OpenBLAS reads its thread
+count once, when it loads), so ``--cores 1``, ``--cores 2`` and SLURM write the same tables. It also selects
+deterministic kernels (``torch.use_deterministic_algorithms``, warning instead of failing for the rare op
+without one). Seeds are the caller's (``torch.manual_seed(seed)`` before building and training). Tested by
+tests/test_drills_determinism.py (each training function twice gives identical weights; a build at
+``--cores 1`` and one at ``--cores 2`` with the compute rules' threads overridden write identical tables) and
+by tests/cluster/ (a SLURM build against a local one).
 """
 from __future__ import annotations
 
+import os
 
-def configure(threads: int) -> None:
-    """Fix torch's intra-op thread count and select deterministic algorithms."""
-    import torch
+# what Snakemake sets from a job's threads (snakemake.shell), read by the BLAS / OpenMP libraries when they load
+THREAD_VARIABLES = ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "GOTO_NUM_THREADS",
+                    "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS")
 
+
+def _check(threads) -> int:
     if not isinstance(threads, int) or isinstance(threads, bool) or threads < 1:
         raise ValueError(f"threads must be a positive integer, got {threads!r}")
+    return threads
+
+
+def pin_threads(threads: int, environ=None) -> None:
+    """Set every BLAS / OpenMP thread variable of ``environ`` (default ``os.environ``) to ``threads``: numpy's
+    OpenBLAS, torch's OpenMP and every child process then start with that many threads, not the executor's."""
+    environ = os.environ if environ is None else environ
+    for name in THREAD_VARIABLES:
+        environ[name] = str(_check(threads))
+
+
+def configure(threads: int) -> None:
+    """Fix the BLAS / OpenMP thread variables and torch's intra-op thread count, and select deterministic
+    algorithms. Call it before numpy is imported, or numpy's BLAS keeps the thread count it loaded with."""
+    pin_threads(threads)
+    import torch
+
     torch.set_num_threads(threads)
     deterministic_algorithms(torch)
     # no NaN fill of every torch.empty: it costs time, and no result here may depend on uninitialised memory

@@ -17,8 +17,8 @@ rule adapt_scene:
         "results/benchmarks/adapt_scene/raw/{dataset}/{scene}.tsv",
     threads: 1
     resources:
-        mem_mb=2000,
-        runtime=30,
+        mem_mb=job_mem_mb(2000),
+        runtime=job_runtime(30),
     conda:
         ENVS["data"]
     script:
@@ -38,8 +38,8 @@ rule adapt_clips:
         "results/benchmarks/adapt_clips/raw/clips/{split}.tsv",
     threads: 1
     resources:
-        mem_mb=1000,
-        runtime=30,
+        mem_mb=job_mem_mb(1000),
+        runtime=job_runtime(30),
     conda:
         ENVS["data"]
     script:

@@ -23,8 +23,8 @@ rule benchmark_summary:
         rule_stages=RULE_STAGES,
     threads: 1
     resources:
-        mem_mb=1000,
-        runtime=5,
+        mem_mb=job_mem_mb(1000),
+        runtime=job_runtime(5),
     conda:
         ENVS["tables"]
     script:

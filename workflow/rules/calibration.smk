@@ -31,8 +31,8 @@ rule calibration_eval:
         method=calib_plan.METHOD_PATTERN,
     threads: 1
     resources:
-        mem_mb=2000,
-        runtime=15,
+        mem_mb=job_mem_mb(2000),
+        runtime=job_runtime(15),
     conda:
         ENVS["calibration"]
     script:
@@ -58,8 +58,8 @@ rule calibration_series:
         split=r"train|test|long",
     threads: 1
     resources:
-        mem_mb=2000,
-        runtime=10,
+        mem_mb=job_mem_mb(2000),
+        runtime=job_runtime(10),
     conda:
         ENVS["calibration"]
     script:
@@ -80,8 +80,8 @@ rule calibration_fig1:
         figure="|".join(CALIB_FIGURES) or "(?!)",
     threads: 1
     resources:
-        mem_mb=1000,
-        runtime=10,
+        mem_mb=job_mem_mb(1000),
+        runtime=job_runtime(10),
     conda:
         ENVS["calibration"]
     script:

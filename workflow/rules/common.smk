@@ -3,11 +3,19 @@ import re
 
 import redsup.adapters
 import redsup.config
+import redsup.jobs
 import redsup.tables.contract as table_contract
 
 _resolved = redsup.config.resolve(config)
 config.clear()
 config.update(_resolved)
+
+# What a job asks for (config jobs, redsup.jobs): a rule's job_mem_mb(3000) / job_runtime(60) are its values at the
+# default profile, scaled to the size profile; the rules that run a network take COMPUTE_THREADS threads, the same
+# number their torch / BLAS pools get whatever the executor grants (redsup.determinism)
+COMPUTE_THREADS = config["jobs"]["compute_threads"]
+job_mem_mb = redsup.jobs.resource(config["jobs"], "mem_mb")
+job_runtime = redsup.jobs.resource(config["jobs"], "runtime")
 
 # conda env of each stage's rules (envs/<stage>.yaml, pinned; used with --sdm conda, e.g. the SLURM profile)
 ENVS = {stage: f"../../envs/{stage}.yaml" for stage in ("data", "velocity", "depth", "calibration", "lifting",

@@ -34,10 +34,10 @@ rule train_depth:
         "results/benchmarks/train_depth/depth/models/{model}.tsv",
     wildcard_constraints:
         model="|".join(re.escape(m) for m in DEPTH_MODELS) or "(?!)",
-    threads: 1
+    threads: COMPUTE_THREADS
     resources:
-        mem_mb=3000,
-        runtime=60,
+        mem_mb=job_mem_mb(3000),
+        runtime=job_runtime(60),
     conda:
         ENVS["depth"]
     script:
@@ -57,10 +57,10 @@ rule predict_depth:
         "results/benchmarks/predict_depth/depth/predictions/{dataset}/{mode}/{scene}.tsv",
     wildcard_constraints:
         mode=r"[A-Za-z0-9_]+",
-    threads: 1
+    threads: COMPUTE_THREADS
     resources:
-        mem_mb=2000,
-        runtime=20,
+        mem_mb=job_mem_mb(2000),
+        runtime=job_runtime(20),
     conda:
         ENVS["depth"]
     script:
@@ -81,10 +81,10 @@ rule depth_eval:
         "results/benchmarks/depth_eval/depth/eval/{run}.tsv",
     wildcard_constraints:
         run="|".join(re.escape(r) for r in sorted(DEPTH_RUNS)) or "no_depth_runs",
-    threads: 1
+    threads: COMPUTE_THREADS
     resources:
-        mem_mb=3000,
-        runtime=60,
+        mem_mb=job_mem_mb(3000),
+        runtime=job_runtime(60),
     conda:
         ENVS["depth"]
     script:
@@ -107,8 +107,8 @@ rule depth_figure:
         figure="|".join(DEPTH_FIGURES) or "(?!)",
     threads: 1
     resources:
-        mem_mb=1000,
-        runtime=10,
+        mem_mb=job_mem_mb(1000),
+        runtime=job_runtime(10),
     conda:
         ENVS["depth"]
     script:
@@ -129,8 +129,8 @@ rule galteland_figure:
         figure="|".join(GALTELAND_FIGURES) or "(?!)",
     threads: 1
     resources:
-        mem_mb=2000,
-        runtime=10,
+        mem_mb=job_mem_mb(2000),
+        runtime=job_runtime(10),
     conda:
         ENVS["depth"]
     script:

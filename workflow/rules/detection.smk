@@ -14,8 +14,8 @@ rule detect_instances:
         "results/benchmarks/detect_instances/prepared/{dataset}/{scene}/detections_{level}.tsv",
     threads: 1
     resources:
-        mem_mb=2000,
-        runtime=30,
+        mem_mb=job_mem_mb(2000),
+        runtime=job_runtime(30),
     conda:
         ENVS["data"]
     script:
@@ -34,8 +34,8 @@ rule segment_road:
         "results/benchmarks/segment_road/prepared/{dataset}/{scene}/road.tsv",
     threads: 1
     resources:
-        mem_mb=2000,
-        runtime=30,
+        mem_mb=job_mem_mb(2000),
+        runtime=job_runtime(30),
     conda:
         ENVS["data"]
     script:
@@ -55,8 +55,8 @@ rule tracks3d:
         "results/benchmarks/tracks3d/prepared/{dataset}/{scene}/tracks3d_{level}.tsv",
     threads: 1
     resources:
-        mem_mb=1000,
-        runtime=20,
+        mem_mb=job_mem_mb(1000),
+        runtime=job_runtime(20),
     conda:
         ENVS["data"]
     script:
@@ -75,8 +75,8 @@ rule medianflow:
         "results/benchmarks/medianflow/prepared/clips/{split}/medianflow.tsv",
     threads: 1
     resources:
-        mem_mb=2000,
-        runtime=60,
+        mem_mb=job_mem_mb(2000),
+        runtime=job_runtime(60),
     conda:
         ENVS["data"]
     script:

@@ -28,8 +28,8 @@ rule lidar_detector_split:
         split="train|test",
     threads: 1
     resources:
-        mem_mb=3000,
-        runtime=20,
+        mem_mb=job_mem_mb(3000),
+        runtime=job_runtime(20),
     conda:
         ENVS["detector"]
     script:
@@ -53,10 +53,10 @@ rule lidar_detector_train:
     wildcard_constraints:
         conf="|".join(LD_CONFS),
         seed="|".join(LD_SEEDS),
-    threads: LD["threads"]
+    threads: COMPUTE_THREADS
     resources:
-        mem_mb=4000,
-        runtime=60,
+        mem_mb=job_mem_mb(4000),
+        runtime=job_runtime(60),
     conda:
         ENVS["detector"]
     script:

@@ -27,8 +27,8 @@ rule template_field:
         stage="lifting|lidar_detector",
     threads: 1
     resources:
-        mem_mb=2000,
-        runtime=10,
+        mem_mb=job_mem_mb(2000),
+        runtime=job_runtime(10),
     conda:
         ENVS["lifting"]
     script:
@@ -51,10 +51,10 @@ rule lifting_run:
     wildcard_constraints:
         conf="|".join(LIFT_CONFS),
         seed="|".join(LIFT_SEEDS),
-    threads: LIFT["threads"]
+    threads: COMPUTE_THREADS
     resources:
-        mem_mb=3000,
-        runtime=60,
+        mem_mb=job_mem_mb(3000),
+        runtime=job_runtime(60),
     conda:
         ENVS["lifting"]
     script:
@@ -75,10 +75,10 @@ rule lifting_labels:
     wildcard_constraints:
         conf="|".join(LIFT_CONFS),
         seed="|".join(LIFT_SEEDS),
-    threads: LIFT["threads"]
+    threads: COMPUTE_THREADS
     resources:
-        mem_mb=2000,
-        runtime=20,
+        mem_mb=job_mem_mb(2000),
+        runtime=job_runtime(20),
     conda:
         ENVS["lifting"]
     script:

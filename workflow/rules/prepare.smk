@@ -13,8 +13,8 @@ rule prepare_camera:
         "results/benchmarks/prepare_camera/prepared/{dataset}/{scene}/{camera}.tsv",
     threads: 1
     resources:
-        mem_mb=2000,
-        runtime=30,
+        mem_mb=job_mem_mb(2000),
+        runtime=job_runtime(30),
     conda:
         ENVS["data"]
     script:
@@ -33,8 +33,8 @@ rule lidar_depth:
         "results/benchmarks/lidar_depth/prepared/{dataset}/{scene}/{camera}_depth.tsv",
     threads: 1
     resources:
-        mem_mb=2000,
-        runtime=30,
+        mem_mb=job_mem_mb(2000),
+        runtime=job_runtime(30),
     conda:
         ENVS["data"]
     script:

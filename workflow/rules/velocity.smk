@@ -33,8 +33,8 @@ rule velocity_fit_generator:
         "results/benchmarks/velocity_fit_generator/velocity/generator_statistics.tsv",
     threads: 1
     resources:
-        mem_mb=1000,
-        runtime=10,
+        mem_mb=job_mem_mb(1000),
+        runtime=job_runtime(10),
     conda:
         ENVS["velocity"]
     script:
@@ -61,8 +61,8 @@ rule velocity_baseline:
         run="|".join(re.escape(r) for r in VELOCITY_BASELINES) or "(?!)",
     threads: 1
     resources:
-        mem_mb=1000,
-        runtime=10,
+        mem_mb=job_mem_mb(1000),
+        runtime=job_runtime(10),
     conda:
         ENVS["velocity"]
     script:
@@ -95,10 +95,10 @@ rule velocity_mlp:
         run=lambda wc: VELOCITY_RUNS[wc.run],
     wildcard_constraints:
         run="|".join(re.escape(r) for r in VELOCITY_MLP) or "(?!)",
-    threads: 1
+    threads: COMPUTE_THREADS
     resources:
-        mem_mb=2000,
-        runtime=60,
+        mem_mb=job_mem_mb(2000),
+        runtime=job_runtime(60),
     conda:
         ENVS["velocity"]
     script:
@@ -117,8 +117,8 @@ rule velocity_clip_counts:
         "results/benchmarks/velocity_clip_counts/velocity/clip_counts.tsv",
     threads: 1
     resources:
-        mem_mb=1000,
-        runtime=10,
+        mem_mb=job_mem_mb(1000),
+        runtime=job_runtime(10),
     conda:
         ENVS["velocity"]
     script:
@@ -141,8 +141,8 @@ rule velocity_figure_numbers:
         figure="|".join(VELOCITY_FIGURES) or "(?!)",
     threads: 1
     resources:
-        mem_mb=1000,
-        runtime=10,
+        mem_mb=job_mem_mb(1000),
+        runtime=job_runtime(10),
     conda:
         ENVS["velocity"]
     script:
@@ -164,8 +164,8 @@ rule velocity_figure:
         figure="|".join(VELOCITY_FIGURES) or "(?!)",
     threads: 1
     resources:
-        mem_mb=1000,
-        runtime=10,
+        mem_mb=job_mem_mb(1000),
+        runtime=job_runtime(10),
     conda:
         ENVS["velocity"]
     script:

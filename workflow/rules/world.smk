@@ -15,8 +15,8 @@ rule world_scene:
         "results/benchmarks/world_scene/raw/{dataset}/{scene}.tsv",
     threads: 1
     resources:
-        mem_mb=3000,
-        runtime=60,
+        mem_mb=job_mem_mb(3000),
+        runtime=job_runtime(60),
     conda:
         ENVS["data"]
     script:
@@ -34,10 +34,10 @@ rule world_clips:
         run="results/runs/raw/clips/{split}.json",
     benchmark:
         "results/benchmarks/world_clips/raw/clips/{split}.tsv",
-    threads: 1
+    threads: COMPUTE_THREADS
     resources:
-        mem_mb=3000,
-        runtime=60,
+        mem_mb=job_mem_mb(3000),
+        runtime=job_runtime(60),
     conda:
         ENVS["data"]
     script:

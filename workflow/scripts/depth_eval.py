@@ -3,6 +3,11 @@ import sys
 
 sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821  (log first)
 
+# torch / BLAS threads from the configuration, not the executor, and deterministic kernels, before numpy
+# and torch load: same seed -> same bits under any --cores or cluster (redsup.determinism)
+from redsup.determinism import configure as deterministic_torch  # noqa: E402
+deterministic_torch(snakemake.config["jobs"]["compute_threads"])  # noqa: F821
+
 import json  # noqa: E402
 
 import torch  # noqa: E402
@@ -12,8 +17,6 @@ from redsup.fileio import write_text_atomic  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
 
 sm = snakemake  # noqa: F821
-from redsup.determinism import configure as deterministic_torch  # noqa: E402
-deterministic_torch(sm.threads)  # the rule's threads and deterministic kernels: same seed -> same bits
 cfg = sm.config["depth"]
 spec = plan.spec_of(sm.params.run)
 tables = list(sm.params.run["tables"])
@@ -30,7 +33,7 @@ with child_run(sm.log.run, tables[0], spec.name, rule=sm.rule, wildcards=dict(sm
         seqs.append(experiments.EvalSequence(seq, data.read_gt_depth(gt)))
     result = experiments.run_spec(spec, models, meta, seqs, cfg,
                                   progress=lambda i, n: print(f"{i}/{n}", flush=True) if i % 10 == 0 else None)
-    result["timing"] = experiments.timing_context(sm.threads, (int(meta["height"]), int(meta["width"])))
+    result["timing"] = experiments.timing_context(torch.get_num_threads(), (int(meta["height"]), int(meta["width"])))
     curve_name = "adapt_loss" if spec.kind != "direct" else "direct_loss"
     for step, value in enumerate(result["loss_curve"], start=1):
         run.log_metric(curve_name, value, step=step)

@@ -3,6 +3,11 @@ import sys
 
 sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821  (log first)
 
+# torch / BLAS threads from the configuration, not the executor, and deterministic kernels, before numpy
+# and torch load: same seed -> same bits under any --cores or cluster (redsup.determinism)
+from redsup.determinism import configure as deterministic_torch  # noqa: E402
+deterministic_torch(snakemake.config["jobs"]["compute_threads"])  # noqa: F821
+
 import time  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -15,8 +20,6 @@ from redsup.fileio import save_npz_atomic  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
 
 sm = snakemake  # noqa: F821
-from redsup.determinism import configure as deterministic_torch  # noqa: E402
-deterministic_torch(sm.threads)  # the rule's threads and deterministic kernels: same seed -> same bits
 dev = sm.config["depth"]["device"]
 device = dev if dev != "auto" else ("cuda" if torch.cuda.is_available() else "cpu")
 name = f"{sm.wildcards.dataset}/{sm.wildcards.mode}/{sm.wildcards.scene}"

@@ -4,6 +4,11 @@ import sys
 
 sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821  (log first)
 
+# torch / BLAS threads from the configuration, not the executor, and deterministic kernels, before numpy
+# and torch load: same seed -> same bits under any --cores or cluster (redsup.determinism)
+from redsup.determinism import configure as deterministic_torch  # noqa: E402
+deterministic_torch(snakemake.config["jobs"]["compute_threads"])  # noqa: F821
+
 import json  # noqa: E402
 
 import torch  # noqa: E402
@@ -17,8 +22,6 @@ from redsup.runlog import child_run, plain  # noqa: E402
 from redsup.mlflow_model import log_model  # noqa: E402
 
 sm = snakemake  # noqa: F821
-from redsup.determinism import configure as deterministic_torch  # noqa: E402
-deterministic_torch(sm.threads)  # the rule's threads and deterministic kernels: same seed -> same bits
 cfg = sm.config["depth"]
 dataset, mode, seed_index = parse_model(sm.wildcards.model)
 mode_cfg = cfg["modes"][mode]

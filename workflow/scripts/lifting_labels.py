@@ -4,6 +4,11 @@ import sys
 
 sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821  (log first)
 
+# torch / BLAS threads from the configuration, not the executor, and deterministic kernels, before numpy
+# and torch load: same seed -> same bits under any --cores or cluster (redsup.determinism)
+from redsup.determinism import configure as deterministic_torch  # noqa: E402
+deterministic_torch(snakemake.config["jobs"]["compute_threads"])  # noqa: F821
+
 import torch  # noqa: E402
 
 from redsup.fileio import save_npz_atomic  # noqa: E402
@@ -13,8 +18,6 @@ from redsup.det3d.template import load_template, spec_from_config  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
 
 sm = snakemake  # noqa: F821
-from redsup.determinism import configure as deterministic_torch  # noqa: E402
-deterministic_torch(sm.threads)  # the rule's threads and deterministic kernels: same seed -> same bits
 cfg = sm.config["lifting"]
 conf, seed_index = sm.wildcards.conf, int(sm.wildcards.seed)
 run_name = plan.run_id(conf, seed_index)

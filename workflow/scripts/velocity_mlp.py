@@ -4,6 +4,11 @@ import sys
 
 sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821  (log first)
 
+# torch / BLAS threads from the configuration, not the executor, and deterministic kernels, before numpy
+# and torch load: same seed -> same bits under any --cores or cluster (redsup.determinism)
+from redsup.determinism import configure as deterministic_torch  # noqa: E402
+deterministic_torch(snakemake.config["jobs"]["compute_threads"])  # noqa: F821
+
 import json  # noqa: E402
 from pathlib import Path  # noqa: E402
 
@@ -19,8 +24,6 @@ from redsup.velocity.mlp import resolve_device, save_model  # noqa: E402
 from redsup.velocity.report import write_configuration_outputs  # noqa: E402
 
 sm = snakemake  # noqa: F821
-from redsup.determinism import configure as deterministic_torch  # noqa: E402
-deterministic_torch(sm.threads)  # the rule's threads and deterministic kernels: same seed -> same bits
 vcfg = sm.config["velocity"]
 spec = sm.params.run
 configuration = plan.configurations(sm.config)[spec["configuration"]]
