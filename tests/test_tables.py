@@ -391,10 +391,16 @@ def test_seed_noise_decides_the_verdict():
     assert lo == pytest.approx(0.002 - 2.7764 * 0.016330, abs=1e-5)
     assert hi == pytest.approx(0.002 + 2.7764 * 0.016330, abs=1e-5)
     ours2 = ours.copy()
-    ours2.loc["whole network", "Abs Rel"] = 0.60
-    noise["whole network"]["Abs Rel"] = tables.noise.seeds([0.58, 0.60, 0.62])
+    ours2.loc["whole network", "Abs Rel"] = 0.70
+    noise["whole network"]["Abs Rel"] = tables.noise.seeds([0.68, 0.70, 0.72])
     c2 = {x["text"]: x for x in evaluate_claims("mccraith_ch4_table1", ours2, noise=noise)}[text]
     assert c2["verdict"] == "reproduces"
+    # 'significantly' sets a minimum effect: half the thesis' 80 % on our baseline, 0.5 x 0.8 x 0.437 = 0.175; a
+    # margin of 0.163 -+ 0.04 is beyond the noise but not beyond that floor
+    ours2.loc["whole network", "Abs Rel"] = 0.60
+    noise["whole network"]["Abs Rel"] = tables.noise.seeds([0.58, 0.60, 0.62])
+    c2b = {x["text"]: x for x in evaluate_claims("mccraith_ch4_table1", ours2, noise=noise)}[text]
+    assert c2b["verdict"] == "inconclusive" and "minimum effect 0.1749" in c2b["evidence"]
     # the opposite effect beyond the noise is a contradiction
     ours3 = ours.copy()
     ours3.loc["whole network", "Abs Rel"] = 0.30

@@ -276,7 +276,7 @@ def table_frame(table_id: str, config: Mapping, rows: Sequence[tuple], results: 
         noise[label] = {col: noise_lib.with_sampling(noise_lib.seeds(values[col], pair),
                                                      [f[1].get(label, {}).get(col) for f in frames
                                                       if label in f[0].index])
-                        for col in METRIC_COLUMNS.values() if col in values}
+                        for col in values if any(col in f[1].get(label, {}) for f in frames)}
     return TableFrame(ours, noise, table_note(config, tcfg, infos[0], max(seen.values()), models, timing))
 
 

@@ -34,7 +34,7 @@ def table_frame(rows: Seq[Row], results: Seq[Mapping], time_column: str | None =
     seconds per frame) when given, ``Abs Rel (last quarter)`` when ``with_last_quarter``, ``frames`` (averaged: the
     group's common frames) and ``skipped`` (frames this row could not evaluate: missing neighbour, no valid
     ground truth, ...); ``fps_column``: 1 / mean seconds per frame. ``noise``: a bootstrap record per metric cell over the group's common frames (the
-    same units for every row of a group: a paired bootstrap). info holds the skip reasons and the frame
+    same units for every row of a group: a paired bootstrap), and per time / FPS cell over the frames' timings. info holds the skip reasons and the frame
     counts per group."""
     from redsup.tables import noise as noise_lib
 
@@ -61,10 +61,16 @@ def table_frame(rows: Seq[Row], results: Seq[Mapping], time_column: str | None =
                                                           for r in kept})
                                 for key, col in METRIC_COLUMNS.items()}
         secs = [r["seconds"] for r in kept if r.get("seconds") is not None]
+        timed = {f"{r['sequence']}/{r['frame']}": float(r["seconds"]) for r in kept if r.get("seconds") is not None}
         if time_column:
             line[time_column] = float(np.mean(secs)) if secs else np.nan
+            if timed:  # every frame is one timing: the column's spread over the frames (and their scenes)
+                noise.setdefault(row.label, {})[time_column] = noise_lib.bootstrap(timed)
         if fps_column:  # frames per second of the prediction (batch of one), where the run measured it
             line[fps_column] = 1.0 / float(np.mean(secs)) if secs and np.mean(secs) > 0 else np.nan
+            if timed:
+                noise.setdefault(row.label, {})[fps_column] = noise_lib.bootstrap(
+                    unit_ids=list(timed), statistic=lambda us, t=timed: 1.0 / float(np.mean([t[u] for u in us])))
         line["frames"] = len(kept)
         line["skipped"] = sum("reason" in r for r in recs)
         reasons = sorted({r["reason"] for r in recs if "reason" in r})

@@ -346,22 +346,26 @@ def resampled_ap(gts: list[FrameGT], dets: list[FrameDet], index_sets, metric: s
 
 def bootstrap_ap(gts: list[FrameGT], dets: list[FrameDet], unit_ids: list[str],
                  specs: tuple[tuple[str, float], ...], n: int, difficulties: tuple[str, ...] = DIFFICULTIES) -> dict:
-    """The test-sampling noise of a split's AP: ``resampled_ap`` on ``n`` bootstrap resamples of its frames
-    (``unit_ids``, one per frame, name them; the resamples are those of ``redsup.tables.noise.resample_indices``,
-    a function of the ids only, so every run on the same frames draws the same ones and rows pair up) for each
-    (metric, IoU) of ``specs`` and each of ``difficulties`` (a resample costs two matching passes for each). Returns {"units": digest, "n_units": F, "values": {key: [n floats]}}."""
-    from redsup.tables.noise import resample_indices, units_digest
+    """The test-sampling noise of a split's AP: ``resampled_ap`` on ``n`` cluster-bootstrap resamples of its frames
+    (``unit_ids``, one per frame, ``"<scene>/<frame>"``: a resample draws scenes and takes their frames; the draw is
+    ``redsup.stats.resample_sets``', a function of the ids only, so every run on the same frames draws the same
+    ones and rows pair up) for each (metric, IoU) of ``specs`` and each of ``difficulties`` (a resample costs two
+    matching passes for each). Returns {"units": digest, "n_units": F, "n_clusters": scenes, "values": {key: [n
+    floats]}}."""
+    from redsup.stats import n_clusters, resample_sets, units_digest
 
     if len(unit_ids) != len(gts) or len(set(unit_ids)) != len(unit_ids):
         raise ValueError(f"bootstrap_ap: {len(unit_ids)} unit ids for {len(gts)} frames (one distinct id a frame)")
-    idx, sorted_ids = resample_indices(unit_ids, n)
+    sets, sorted_ids = resample_sets(unit_ids, n)
     position = {u: k for k, u in enumerate(str(x) for x in unit_ids)}
-    frames = np.array([position[u] for u in sorted_ids])[idx]
+    to_frame = np.array([position[u] for u in sorted_ids])
+    frames = [to_frame[s] for s in sets]
     values: dict[str, list[float]] = {}
     for metric, iou in specs:
         values |= {k: [float(x) for x in v]
                    for k, v in resampled_ap(gts, dets, frames, metric, iou, difficulties=difficulties).items()}
-    return {"units": units_digest(unit_ids), "n_units": len(unit_ids), "values": values}
+    return {"units": units_digest(unit_ids), "n_units": len(unit_ids), "n_clusters": n_clusters(unit_ids),
+            "values": values}
 
 
 # ------------------------------------------------------------------------------------------------ command
