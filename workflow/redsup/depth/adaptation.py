@@ -9,6 +9,14 @@ trained snapshot before every sample) and ``sequential`` (weights keep evolving 
 ``models`` is a mapping name -> module with the keys of ``networks.MODULE_NAMES``. Functions here change the
 parameters of ``models`` only while they run: ``instance_wise`` and ``sequential`` restore the snapshot before
 returning, the adapted weights are returned as new state dicts, and the caller's snapshot is never written.
+
+``adapt_batched`` / ``instance_wise_batched``: instance-wise adaptation of K samples as one optimisation. Every
+sample has its own copy of the adapted parameters (stacked, (K, *shape)); ``torch.func.vmap`` over
+``torch.func.functional_call`` runs the unchanged per-sample loss on its own copy (the other parameters and the
+buffers shared), and one backward of the sum of the K losses gives each copy the gradient of its own loss only.
+BatchNorm in eval mode (running statistics) keeps the samples independent, so each sample gets the numbers of
+``adapt`` on it alone, up to float rounding (other convolution kernels: grouped / batched instead of batch 1).
+They never write the parameters of ``models``.
 """
 from __future__ import annotations
 
@@ -17,6 +25,7 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 
 import torch
 from torch import nn
+from torch.func import functional_call, vmap
 
 from redsup.optim import SGD
 
@@ -233,6 +242,289 @@ def _adapt_and_predict(models, loss_fn, predict_fn, sample, params, lr, steps, c
         for m, training in modes:
             m.training = training
     return {"output": output, "losses": losses, "seconds": time.perf_counter() - start}
+
+
+# ---- instance-wise adaptation of several samples at once ------------------------------------------------------
+
+def _stack_samples(samples: Sequence):
+    """The samples' tensors stacked on a new leading dim (dicts / lists / tuples of tensors, same structure)."""
+    first = samples[0]
+    if isinstance(first, torch.Tensor):
+        return torch.stack(list(samples))
+    if isinstance(first, Mapping):
+        return {k: _stack_samples([s[k] for s in samples]) for k in first}
+    if isinstance(first, (list, tuple)):
+        return type(first)(_stack_samples([s[i] for s in samples]) for i in range(len(first)))
+    raise TypeError(f"a batched sample holds tensors, dicts, lists or tuples only, not {type(first).__name__}")
+
+
+def _select(tree, index: torch.Tensor):
+    """``tree``'s stacked tensors at the leading-dim positions ``index``."""
+    if isinstance(tree, torch.Tensor):
+        return tree.index_select(0, index.to(tree.device))
+    if isinstance(tree, Mapping):
+        return {k: _select(v, index) for k, v in tree.items()}
+    return type(tree)(_select(v, index) for v in tree)
+
+
+def _unstack(tree, j: int):
+    if isinstance(tree, torch.Tensor):
+        return tree[j]
+    if isinstance(tree, Mapping):
+        return {k: _unstack(v, j) for k, v in tree.items()}
+    return type(tree)(_unstack(v, j) for v in tree)
+
+
+def _to(tree, device):
+    if isinstance(tree, torch.Tensor):
+        return tree.to(device)
+    if isinstance(tree, Mapping):
+        return {k: _to(v, device) for k, v in tree.items()}
+    return type(tree)(_to(v, device) for v in tree)
+
+
+def sample_signature(sample) -> tuple:
+    """Structure, shapes and dtypes of a sample: samples with the same signature can be adapted in one batch."""
+    if isinstance(sample, torch.Tensor):
+        return (tuple(sample.shape), str(sample.dtype))
+    if isinstance(sample, Mapping):
+        return tuple((k, sample_signature(v)) for k, v in sample.items())
+    if isinstance(sample, (list, tuple)):
+        return (type(sample).__name__,) + tuple(sample_signature(v) for v in sample)
+    return (type(sample).__name__,)
+
+
+class _Call(nn.Module):
+    """``fn(models, sample, **kw)`` as a module call, so that ``functional_call`` can swap parameters of ``models``."""
+
+    def __init__(self, models: Models):
+        super().__init__()
+        self.models = models if isinstance(models, nn.ModuleDict) else nn.ModuleDict(dict(models))
+
+    def forward(self, fn, sample, kwargs):
+        return fn(self.models, sample, **kwargs)
+
+
+class _SampleNoise:
+    """The ``generator`` a loss gets under ``vmap``: a callable noise source (``losses.automask``) drawing from each
+    sample's own ``torch.Generator``, so that every sample sees the draws it would see alone (the unbatched
+    draws of all generators, stacked, then picked by the batched sample index)."""
+
+    def __init__(self, generators: Sequence[torch.Generator]):
+        self.generators = list(generators)
+        self.index: torch.Tensor | None = None
+
+    def __call__(self, shape, dtype, device) -> torch.Tensor:
+        draws = torch.stack([torch.randn(tuple(shape), generator=g, dtype=dtype, device=device)
+                             for g in self.generators])
+        return draws[self.index]
+
+
+def _set_eval(models: Models) -> list[tuple[nn.Module, bool]]:
+    modes = [(m, m.training) for model in models.values() for m in model.modules()]
+    for model in models.values():
+        model.eval()
+    return modes
+
+
+class AdaptedCopies:
+    """The per-sample weights of ``adapt_batched``: ``weights`` name -> (K, *shape) (the adapted parameters, named
+    as in ``_Call``), ``samples`` the K stacked samples."""
+
+    def __init__(self, call: _Call, weights: dict[str, torch.Tensor], samples, n: int):
+        self._call, self.weights, self.samples, self.n = call, weights, samples, n
+
+    def map(self, fn: Callable[[Models, object], object]) -> list:
+        """``fn(models, sample)`` (tensors out, vmappable: no ``.item()``, no numpy) for every sample with its
+        own weights, in eval mode and without gradients; returns the K per-sample results."""
+        modes = _set_eval(self._call.models)
+        try:
+            with torch.no_grad():
+                out = vmap(lambda w, s: functional_call(self._call, w, (fn, s, {})))(self.weights, self.samples)
+        finally:
+            for m, training in modes:
+                m.training = training
+        return [_unstack(out, j) for j in range(self.n)]
+
+    def state(self, j: int) -> Snapshot:
+        """Sample ``j``'s adapted parameters as ``{module: {name: tensor}}`` (copies; the adapted ones only)."""
+        out: Snapshot = {}
+        for name, w in self.weights.items():
+            module, key = name.split(".", 2)[1:]
+            out.setdefault(module, {})[key] = w[j].detach().clone()
+        return out
+
+
+BatchCallback = Callable[[int, list, float, AdaptedCopies], None]
+
+
+def adapt_batched(models: Models, loss_fn: LossFn, samples: Sequence, params: Sequence[nn.Parameter], lr: float,
+                  steps: int, callback: BatchCallback | None = None,
+                  generators: Sequence[torch.Generator] | None = None) -> tuple[list[list[float]], AdaptedCopies]:
+    """``adapt`` of each of ``samples`` (batch-of-one samples of one signature) from the current weights, all
+    at once: returns the per-sample loss histories and the adapted copies (``AdaptedCopies.map`` predicts with
+    them). The parameters of ``models`` are never written; flags, modes and ``.grad`` as ``adapt`` leaves them.
+
+    ``loss_fn(models, sample)`` is called once per step under ``torch.func.vmap`` (per-sample shapes as alone):
+    it must be vmappable (no ``.item()``, no data-dependent Python control flow). ``generators``: one per sample,
+    passed to ``loss_fn`` as ``generator=`` (a noise source drawing from sample j's generator, as
+    ``loss_fn(..., generator=generators[j])`` would alone); None = ``loss_fn`` takes no generator.
+    ``callback(step, losses, elapsed_s, copies)``: step 0 (losses all None) before the first update, then after
+    update k with the K losses it minimised and the batch's adaptation time so far (callback time excluded).
+
+    Divergence per sample as in ``adapt``: a sample whose loss or gradient is not finite keeps its last finite
+    weights and records NaN for the remaining steps; the other samples go on. The step is then recomputed without
+    it (the generators rewound), so that no backward pass runs on non-finite values.
+    """
+    n = len(samples)
+    call = _Call(models)
+    selected = {id(p) for p in params}
+    names = [k for k, p in call.named_parameters() if id(p) in selected]
+    if len(names) != len(selected):
+        raise ValueError("params must be parameters of models")
+    if generators is not None and len(generators) != n:
+        raise ValueError(f"{len(generators)} generators for {n} samples")
+    device = next(iter(call.parameters())).device
+    stacked = _to(_stack_samples(samples), device) if n else {}
+    current = dict(call.named_parameters())
+    weights = {k: current[k].detach().unsqueeze(0).repeat(n, *([1] * current[k].dim())) for k in names}
+    copies = AdaptedCopies(call, weights, stacked, n)
+    histories: list[list[float]] = [[] for _ in range(n)]
+    if n == 0:
+        return histories, copies
+    all_params = list(call.parameters())
+    flags = [p.requires_grad for p in all_params]
+    modes = [(m, m.training) for m in call.modules()]
+    diverged = [False] * n
+    noise = _SampleNoise([]) if generators is not None else None
+
+    def per_sample(w, sample, index):
+        kwargs = {}
+        if noise is not None:
+            noise.index = index
+            kwargs["generator"] = noise
+        return functional_call(call, w, (loss_fn, sample, kwargs))["loss"]
+
+    def losses_of(active: list[int]) -> tuple[torch.Tensor, dict[str, torch.Tensor]]:
+        idx = torch.tensor(active, dtype=torch.long)
+        leaves = {k: _select(weights[k], idx).requires_grad_(True) for k in names}
+        if noise is not None:
+            noise.generators = [generators[j] for j in active]
+        # randomness "same": the noise source's unbatched draws run once per step; without generators any
+        # random draw in loss_fn is an error (a global-RNG draw could not match the one-at-a-time draws)
+        out = vmap(per_sample, randomness="same" if noise is not None else "error")(
+            leaves, _select(stacked, idx), torch.arange(len(active)))
+        return out, leaves
+
+    try:
+        for m, _ in modes:
+            m.eval()
+        for p in all_params:
+            p.requires_grad_(False)
+            p.grad = None
+        if callback is not None:
+            callback(0, [None] * n, 0.0, copies)
+        elapsed = 0.0
+        for step in range(1, steps + 1):
+            start = time.perf_counter()
+            active = [j for j in range(n) if not diverged[j]]
+            values: dict[int, float] = {}
+            if active:
+                rewind = None if generators is None else [generators[j].get_state() for j in active]
+                loss, leaves = losses_of(active)
+                finite = torch.isfinite(loss.detach()).reshape(len(active), -1).all(1)
+                if not bool(finite.all()):   # drop the diverged samples, redo the step without them
+                    for j, ok in zip(active, finite.tolist()):
+                        diverged[j] = diverged[j] or not ok
+                    if rewind is not None:
+                        for j, state in zip(active, rewind):
+                            if not diverged[j]:
+                                generators[j].set_state(state)
+                    active = [j for j in active if not diverged[j]]
+                    loss, leaves = losses_of(active) if active else (None, {})
+            if active:
+                ok = [True] * len(active)
+                if names and loss.requires_grad:
+                    # one backward of the summed losses: copy j's gradient is the gradient of loss j alone
+                    grads = torch.autograd.grad(loss.sum(), [leaves[k] for k in names], allow_unused=True)
+                    good = torch.ones(len(active), dtype=torch.bool, device=device)
+                    for g in grads:
+                        if g is not None:
+                            good &= torch.isfinite(g.reshape(len(active), -1)).all(1)
+                    ok = good.tolist()
+                    keep = [i for i, fine in enumerate(ok) if fine]
+                    if keep:
+                        pos = torch.tensor(keep, dtype=torch.long, device=device)
+                        rows = torch.tensor([active[i] for i in keep], dtype=torch.long, device=device)
+                        with torch.no_grad():
+                            for k, g in zip(names, grads):
+                                if g is not None:   # as redsup.optim.SGD: p <- p - lr * grad
+                                    new = leaves[k].detach().index_select(0, pos).add(g.index_select(0, pos),
+                                                                                      alpha=-lr)
+                                    weights[k].index_copy_(0, rows, new)
+                for i, j in enumerate(active):
+                    if ok[i]:
+                        values[j] = float(loss[i].detach())
+                    else:
+                        diverged[j] = True
+            for j in range(n):
+                histories[j].append(values.get(j, float("nan")))
+            elapsed += time.perf_counter() - start
+            if callback is not None:
+                callback(step, [h[-1] for h in histories], elapsed, copies)
+    finally:
+        for p, flag in zip(all_params, flags):
+            p.requires_grad_(flag)
+            p.grad = None
+        for m, training in modes:
+            m.training = training
+    return histories, copies
+
+
+def instance_wise_batched(models: Models, state: Snapshot, samples: Iterable, loss_fn: LossFn,
+                          predict_fn: Callable[[Models, object], object], groups: Sequence[str], lr: float,
+                          steps: int, batch_size: int = 8,
+                          callback: Callable[[int, int, float | None, float], None] | None = None,
+                          generators: Sequence[torch.Generator] | None = None) -> list[dict]:
+    """``instance_wise`` with up to ``batch_size`` consecutive samples of one signature adapted at once
+    (``adapt_batched``): the same per-sample results up to float rounding. ``predict_fn`` must be vmappable
+    (tensors out); ``generators`` as ``adapt_batched`` (one per sample). ``seconds`` of a sample = its batch's
+    wall time (adaptation + prediction) / the batch's sample count. Models end at ``state``."""
+    samples = list(samples)
+    params = select_parameters(models, groups)
+    results: list[dict] = []
+    try:
+        load_snapshot(models, state)
+        for chunk in batch_chunks(samples, batch_size):
+            start = time.perf_counter()
+            cb = None if callback is None else (
+                lambda step, losses, elapsed, copies, chunk=chunk: [callback(i, step, loss, elapsed)
+                                                                    for i, loss in zip(chunk, losses)])
+            gens = None if generators is None else [generators[i] for i in chunk]
+            histories, copies = adapt_batched(models, loss_fn, [samples[i] for i in chunk], params, lr, steps, cb,
+                                              gens)
+            outputs = copies.map(predict_fn)
+            seconds = (time.perf_counter() - start) / len(chunk)   # the batch's wall time, shared equally
+            results += [{"output": o, "losses": h, "seconds": seconds} for o, h in zip(outputs, histories)]
+    finally:
+        load_snapshot(models, state)
+    return results
+
+
+def batch_chunks(samples: Sequence, batch_size: int) -> list[list[int]]:
+    """Indices of ``samples`` in consecutive runs of at most ``batch_size`` with one ``sample_signature``."""
+    if batch_size < 1:
+        raise ValueError(f"batch_size must be >= 1, got {batch_size}")
+    chunks: list[list[int]] = []
+    last = None
+    for i, sample in enumerate(samples):
+        sig = sample_signature(sample)
+        if chunks and sig == last and len(chunks[-1]) < batch_size:
+            chunks[-1].append(i)
+        else:
+            chunks.append([i])
+        last = sig
+    return chunks
 
 
 def direct_optimisation(variables: Mapping[str, torch.Tensor],

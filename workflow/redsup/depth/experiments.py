@@ -122,26 +122,63 @@ def _record(seq: EvalSequence, t: int, step: int, ev: evaluation.FrameEval | Non
     return rec
 
 
+def frame_generator(loss_kwargs: Mapping, seed: int) -> torch.Generator | None:
+    """The identity-noise generator of one test frame, seeded with ``seed`` (1000 x sequence + frame in the
+    runners); None without identity noise."""
+    return torch.Generator().manual_seed(seed) if loss_kwargs.get("noise_std", 0) > 0 else None
+
+
 def frame_loss(loss_kwargs: Mapping, seed: int) -> Callable:
     """The adaptation loss of one test frame (`pipeline.batch_loss` with the depth config's settings); its
     identity-noise generator is seeded with ``seed`` (1000 x sequence + frame in the runners)."""
     kw = dict(loss_kwargs)
-    if kw.get("noise_std", 0) > 0:
-        kw["generator"] = torch.Generator().manual_seed(seed)
+    generator = frame_generator(loss_kwargs, seed)
+    if generator is not None:
+        kw["generator"] = generator
     return functools.partial(pipeline.batch_loss, **kw)
+
+
+# Frames an instance-wise run adapts at once (``adaptation.adapt_batched``) unless ``depth.eval.instance_batch``
+# says otherwise; 1 = one frame at a time (``adaptation.adapt``). Same numbers per frame up to float rounding.
+# 1: batching is no faster on CPU at the default profile's size (benchmarks/bench_adaptation_batched.py, 64 x 208,
+# width 16, 1 thread, medians of 5: 1.03 frames/s one at a time, 0.87 / 0.93 / 0.92 / 1.03 batched by 1 / 4 / 8 / 16;
+# CPU time 0.84-1.10x): the photometric loss and the warping are half of a step and cost the same per frame
+# batched, and the adapted encoders' per-copy weight gradients (grouped convolutions) cost what K small ones do.
+INSTANCE_BATCH = 1
+
+
+def _batched(meta: Mapping) -> bool:
+    """Whether a system's adaptation can run batched: Monodepth2's loss and prediction are vmappable."""
+    return meta.get("system", "monodepth2") == "monodepth2"
+
+
+def _predict_tensor(models, batch: Mapping, meta: Mapping, branch: str = "") -> torch.Tensor:
+    """``_predict`` without leaving torch (vmappable): depth (1, 1, H, W) of a batch-of-one."""
+    prev, K = batch.get("prev", batch.get("sources", {}).get("prev")), batch.get("K")
+    return systems.predict_depth(models, meta, batch["target"], prev, K, branch)
 
 
 def run_instance(models: Mapping[str, nn.Module], meta: Mapping, seqs: Seq[EvalSequence],
                  frames: Seq[tuple[int, int]], *, sources: Seq[str], groups: Seq[str], lr: float,
                  checkpoints: Seq[int], eval_cfg: Mapping, loss_kwargs: Mapping, metric_scale: bool | float,
-                 progress: Callable[[int, int], None] | None = None, branch: str = ""
-                 ) -> tuple[list[dict], list[float]]:
+                 progress: Callable[[int, int], None] | None = None, branch: str = "",
+                 batch_size: int | None = None) -> tuple[list[dict], list[float]]:
     """Instance-wise adaptation: for every (sequence, frame) reset to the trained weights, take
     max(checkpoints) SGD steps on the frame's test sample and evaluate the prediction at every checkpoint.
     ``seconds`` of a checkpoint = adaptation time so far + the prediction. Without ``sources`` (prediction
-    only) no sample is needed. Returns (records, mean adaptation loss per step over the adapted frames)."""
+    only) no sample is needed. Returns (records, mean adaptation loss per step over the adapted frames).
+
+    ``batch_size`` (None: ``INSTANCE_BATCH``) consecutive adapted frames run as one batched optimisation
+    (``adaptation.adapt_batched``, Monodepth2 models): the same records up to float rounding, in the same order;
+    1 adapts one frame at a time."""
     checkpoints = sorted(set(int(c) for c in checkpoints))
     n_steps = checkpoints[-1]
+    batch_size = INSTANCE_BATCH if batch_size is None else int(batch_size)
+    if batch_size > 1 and sources and n_steps > 0 and _batched(meta):
+        return _run_instance_batched(models, meta, seqs, frames, sources=sources, groups=groups, lr=lr,
+                                     checkpoints=checkpoints, eval_cfg=eval_cfg, loss_kwargs=loss_kwargs,
+                                     metric_scale=metric_scale, progress=progress, branch=branch,
+                                     batch_size=batch_size)
     state = adaptation.snapshot(models)
     params = adaptation.select_parameters(models, groups) if groups else []
     records: list[dict] = []
@@ -178,6 +215,60 @@ def run_instance(models: Mapping[str, nn.Module], meta: Mapping, seqs: Seq[EvalS
                 progress(n + 1, len(frames))
     finally:
         adaptation.load_snapshot(models, state)
+    return records, (loss_sum / max(loss_n, 1)).tolist()
+
+
+def _run_instance_batched(models, meta, seqs, frames, *, sources, groups, lr, checkpoints, eval_cfg, loss_kwargs,
+                          metric_scale, progress, branch, batch_size) -> tuple[list[dict], list[float]]:
+    """``run_instance`` with up to ``batch_size`` consecutive complete samples adapted at once."""
+    n_steps = checkpoints[-1]
+    params = adaptation.select_parameters(models, groups) if groups else []
+    loss_fn = functools.partial(pipeline.batch_loss, **{k: v for k, v in loss_kwargs.items() if k != "generator"})
+    per_frame: list[list[dict]] = [[] for _ in frames]   # records in frame order, as one at a time
+    loss_sum, loss_n = np.zeros(n_steps), 0
+    pending: list[tuple[int, int, int, dict]] = []   # (position in frames, sequence index, frame, sample)
+
+    def flush() -> None:
+        nonlocal loss_sum, loss_n
+        if not pending:
+            return
+        gens = [frame_generator(loss_kwargs, 1000 * i + t) for _, i, t, _ in pending]
+        gens = None if any(g is None for g in gens) else gens
+
+        def on_step(step, losses, elapsed, copies):
+            if step in checkpoints:
+                start = time.perf_counter()
+                preds = copies.map(functools.partial(_predict_tensor, meta=meta, branch=branch))
+                # a batch's seconds are shared equally by its frames: (the batch's adaptation time so far + its
+                # prediction time) / its frame count, the per-frame cost of adapting them together
+                secs = (elapsed + time.perf_counter() - start) / len(pending)
+                for (pos, i, t, _), pred in zip(pending, preds):
+                    es = seqs[i]
+                    per_frame[pos].append(_record(es, t, step, evaluate_depth(
+                        es.gt[t], pred[0, 0].detach().cpu().numpy(), eval_cfg, metric_scale), secs))
+
+        hists, _ = adaptation.adapt_batched(models, loss_fn, [b for *_, b in pending], params, lr, n_steps,
+                                            on_step, gens)
+        for hist in hists:
+            loss_sum += np.nan_to_num(np.asarray(hist, dtype=float), nan=0.0, posinf=0.0)
+            loss_n += 1
+        if progress is not None:
+            for pos, *_ in pending:
+                progress(pos + 1, len(frames))
+        pending.clear()
+
+    for n, (i, t) in enumerate(frames):
+        es = seqs[i]
+        batch = data.eval_sample(es.seq, t, sources)
+        if isinstance(batch, str):
+            per_frame[n] += [_record(es, t, k, None, None, batch) for k in checkpoints]
+            continue
+        if pending and (len(pending) >= batch_size
+                        or adaptation.sample_signature(batch) != adaptation.sample_signature(pending[0][3])):
+            flush()
+        pending.append((n, i, t, batch))
+    flush()
+    records = [r for recs in per_frame for r in recs]
     return records, (loss_sum / max(loss_n, 1)).tolist()
 
 
@@ -289,7 +380,7 @@ def run_spec(spec: EvalSpec, models, meta: Mapping, seqs: Seq[EvalSequence], dep
         records, curve = run_instance(models, meta, seqs, frames, sources=spec.sources, groups=spec.groups,
                                       lr=spec.lr, checkpoints=spec.checkpoints, eval_cfg=eval_cfg,
                                       loss_kwargs=loss_kwargs, metric_scale=metric_scale, progress=progress,
-                                      branch=spec.branch)
+                                      branch=spec.branch, batch_size=eval_cfg.get("instance_batch"))
     elif spec.kind == "sequential":
         records, curve = run_sequential(models, meta, seqs, sources=spec.sources, groups=spec.groups, lr=spec.lr,
                                         steps=spec.steps, eval_cfg=eval_cfg, loss_kwargs=loss_kwargs,

@@ -5,7 +5,7 @@ Shapes: images (B, C, H, W); error maps (B, 1, H, W); stacks of error maps over 
 """
 from __future__ import annotations
 
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 
 import torch
 import torch.nn.functional as F
@@ -61,17 +61,22 @@ def min_reprojection(errors: torch.Tensor | Sequence[torch.Tensor]) -> torch.Ten
 
 def automask(reproj_errors: torch.Tensor | Sequence[torch.Tensor],
              identity_errors: torch.Tensor | Sequence[torch.Tensor],
-             noise_std: float = 0.0, generator: torch.Generator | None = None) -> torch.Tensor:
+             noise_std: float = 0.0, generator: torch.Generator | Callable | None = None) -> torch.Tensor:
     """Monodepth2 auto-mask (B, 1, H, W), bool: True where the minimum reprojection error is below the minimum
     identity error (the un-warped source), i.e. where the pixel moves relative to the camera.
 
     ``noise_std`` > 0 adds Gaussian noise to the identity errors to break ties (Monodepth2 uses 1e-5);
-    pass a ``generator`` for reproducible noise (otherwise torch's global RNG is used).
+    pass a ``generator`` for reproducible noise (otherwise torch's global RNG is used), or a callable
+    ``(shape, dtype, device) -> standard normal tensor`` (``adaptation.adapt_batched``: each sample's draws from
+    its own generator under ``torch.func.vmap``).
     """
     reproj = min_reprojection(reproj_errors)
     identity = _stack(identity_errors)
     if noise_std > 0:
-        noise = torch.randn(identity.shape, generator=generator, device=identity.device, dtype=identity.dtype)
+        if callable(generator):
+            noise = generator(identity.shape, identity.dtype, identity.device)
+        else:
+            noise = torch.randn(identity.shape, generator=generator, device=identity.device, dtype=identity.dtype)
         identity = identity + noise_std * noise
     return reproj < identity.min(dim=1, keepdim=True).values
 
@@ -99,7 +104,7 @@ def edge_aware_smoothness(disp: torch.Tensor, image: torch.Tensor) -> tuple[torc
 def self_supervised_loss(target: torch.Tensor, warped: torch.Tensor | Sequence[Sequence[torch.Tensor]],
                          identity: torch.Tensor | Sequence[torch.Tensor], disps: Sequence[torch.Tensor], *,
                          smoothness_weight: float = 1e-3, alpha: float = 0.85, automasking: bool = True,
-                         noise_std: float = 1e-5, generator: torch.Generator | None = None,
+                         noise_std: float = 1e-5, generator: torch.Generator | Callable | None = None,
                          pixel_weight: torch.Tensor | None = None) -> dict[str, torch.Tensor]:
     """Monodepth2's multi-scale loss for one target frame (B, 3, H, W).
 
