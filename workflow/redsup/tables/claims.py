@@ -26,9 +26,11 @@ from redsup.tables.registry import (CHECK_TYPES, align, as_frame, column_key, lo
 REPRODUCES, INCONCLUSIVE, CONTRADICTED = "reproduces", "inconclusive", "contradicted"
 RULED_OUT = "thesis effect ruled out"  # the interval holds 0 but excludes the thesis-sized effect: well powered
 NOT_TESTABLE, DATA_DESCRIPTION = "not testable", "data description"
-VERDICTS = (REPRODUCES, INCONCLUSIVE, RULED_OUT, CONTRADICTED, NOT_TESTABLE, DATA_DESCRIPTION)
+UNDER_TRAINED = "under-trained systems"  # compares models far from convergence on val: counted apart
+VERDICTS = (REPRODUCES, INCONCLUSIVE, RULED_OUT, CONTRADICTED, UNDER_TRAINED, NOT_TESTABLE, DATA_DESCRIPTION)
 COUNTED = (REPRODUCES, INCONCLUSIVE, RULED_OUT, CONTRADICTED)
-CATEGORIES = {"not_testable": NOT_TESTABLE, "data_description": DATA_DESCRIPTION}
+CATEGORIES = {"not_testable": NOT_TESTABLE, "data_description": DATA_DESCRIPTION, "under_trained": UNDER_TRAINED}
+MEASURED_ON_OUR_DATA = ("data_description", "under_trained")  # categories whose checks still say what holds here
 
 
 # ------------------------------------------------------------------------------------ Kendall tau
@@ -180,7 +182,8 @@ def _beats(cells: _Cells, a: tuple[str, str, float], b: tuple[str, str, float], 
     """'a beats b': the verdict on the 95 % interval [lo, hi] of the margin by which it does, with the thesis'
     effect on our scale (``thesis_effect``). An interval around 0 that excludes the thesis-sized effect is
     RULED_OUT; with ``min_effect`` (a fraction of the thesis' effect: "substantially") the margin must exceed that
-    floor to reproduce, and an interval wholly below it contradicts the claim."""
+    floor to reproduce, and an interval wholly below the floor rules the claimed size out (only the opposite effect
+    beyond the noise contradicts)."""
     (ar, am, av), (br, bm, bv) = a, b
     na, nb = cells.noise_of(ar, am), cells.noise_of(br, bm)
     lo, hi, how = noise_lib.difference_interval(av, bv, na, nb)
@@ -188,8 +191,10 @@ def _beats(cells: _Cells, a: tuple[str, str, float], b: tuple[str, str, float], 
         lo, hi = -hi, -lo
     effect = thesis_effect(paper, (ar, am), (br, bm), lower, bv)
     floor = min_effect * effect if min_effect is not None and effect is not None else 0.0
-    verdict = noise_lib.verdict_of_interval(lo - floor, hi - floor) or INCONCLUSIVE
-    if verdict == INCONCLUSIVE and effect is not None and lo <= 0 <= hi and hi < effect:
+    verdict = noise_lib.verdict_of_interval(lo, hi) or INCONCLUSIVE
+    if verdict == REPRODUCES and lo <= floor:
+        verdict = RULED_OUT if hi < floor else INCONCLUSIVE  # an effect, but not shown to reach the minimum
+    if verdict == INCONCLUSIVE and effect is not None and lo <= 0 <= hi and hi < max(effect, floor):
         verdict = RULED_OUT
     if min_effect is not None and effect is None and verdict == REPRODUCES:
         verdict = INCONCLUSIVE  # a minimum effect the thesis' own table cannot size: not decided
@@ -366,7 +371,7 @@ def _evaluate(claims, table: pd.DataFrame, directions, headline, noise=None, lit
             (INCONCLUSIVE, "not machine-checked")
         margins = [_plain_margin(m) for _, _, ms in decided for m in ms]
         if category:
-            held = _ON_OUR_DATA.get(verdict) if checks and category == "data_description" else None
+            held = _ON_OUR_DATA.get(verdict) if checks and category in MEASURED_ON_OUR_DATA else None
             verdict = CATEGORIES[category]
             evidence = "; ".join(p for p in (claim.get("reason", ""), held) if p) + f" (measured: {evidence})"
             if held:

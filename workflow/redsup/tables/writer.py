@@ -18,7 +18,7 @@ from redsup.tables.registry import (align, as_frame, load_registry, paper_table,
 
 DASH = "—"
 MARK = {"reproduces": "✔", "contradicted": "✘", "inconclusive": "≈", "thesis effect ruled out": "⊘",
-        "not testable": "○", "data description": "▫"}
+        "under-trained systems": "◌", "not testable": "○", "data description": "▫"}
 
 
 # ------------------------------------------------------------------------------------ formatting
@@ -343,7 +343,9 @@ def write_scorecard(score_jsons: Iterable[str | Path], out_md, registry: dict | 
           "record, or measured on fewer than 5 scenes, decides nothing): **reproduces** (the claimed effect is "
           "beyond the noise), **inconclusive** (inside the noise, a tie, or a cell missing: we could not tell), "
           "**thesis effect ruled out** (no effect beyond the noise, and the interval excludes the thesis' own "
-          "effect on our scale), **contradicted** (the opposite effect is beyond the noise); **not testable** (about prior "
+          "effect on our scale), **contradicted** (the opposite effect is beyond the noise); **under-trained systems** "
+          "(a comparison of models that val shows far from convergence: its measured outcome is shown, not counted); "
+          "**not testable** (about prior "
           "work, real data, or contradicted by the thesis' own table) and **data description** (true by how "
           "the data were configured) are listed but not counted as results. Kendall τ = tau-b of our row "
           "ordering vs the paper's on the headline metric (n = rows in both).", "",
