@@ -1,5 +1,6 @@
 """Shared fixtures: one tiny build of the whole workflow per test session (`built`, or `tiny`: a finished
-build named by $REDSUP_TINY_BUILD)."""
+build named by $REDSUP_TINY_BUILD), and the real data samples (`realdata`: $REDSUP_REALDATA, else
+../shared/realdata beside the repository; the tests that read them skip where they are absent)."""
 import os
 import subprocess
 import sys
@@ -9,6 +10,16 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 SNAKEMAKE = [sys.executable, "-m", "snakemake", "--snakefile", str(ROOT / "Snakefile"), "--cores", "2"]
+
+# The real data samples (third-party, never copied into the repository): the folder and what it must hold,
+# as its README lists them.
+REALDATA_ENV = "REDSUP_REALDATA"
+REALDATA_SAMPLES = ("kitti_object/training", "kitti_raw/2011_09_26", "tusimple_velocity/train")
+
+
+def realdata_root() -> Path:
+    """Where the real data samples are: $REDSUP_REALDATA, else ../shared/realdata beside the repository."""
+    return Path(os.environ.get(REALDATA_ENV) or ROOT.parent / "shared" / "realdata")
 
 
 def run_snakemake(workdir, *args, check=True, profile="tiny"):
@@ -34,6 +45,20 @@ def tiny(request):
     """The session's tiny build, or a finished one named by $REDSUP_TINY_BUILD (read only)."""
     path = os.environ.get("REDSUP_TINY_BUILD")
     return Path(path) if path else request.getfixturevalue("built")
+
+
+@pytest.fixture(scope="session")
+def realdata() -> Path:
+    """The folder of the real data samples (`realdata_root`); the test is skipped, saying where it looked, when
+    the folder or one of its samples (REALDATA_SAMPLES) is absent."""
+    root = realdata_root()
+    if not root.is_dir():
+        pytest.skip(f"real data samples not found at {root} (set ${REALDATA_ENV} to their folder)")
+    missing = [s for s in REALDATA_SAMPLES if not (root / s).is_dir()]
+    if missing:
+        pytest.skip(f"real data samples incomplete at {root}: no {', '.join(missing)} "
+                    f"(set ${REALDATA_ENV} to a complete copy)")
+    return root
 
 
 _COVERAGE_ROWS: list = []

@@ -1,8 +1,7 @@
-"""Dataset adapters on the genuine samples in ../shared/realdata (KITTI object frames 000000-000003, a 10-frame
-2011_09_26 raw drive with its real calibration, one TuSimple clip). Skipped when that folder is absent; the
-files are read in place, never copied into the repository.
+"""Dataset adapters on the genuine samples of the `realdata` fixture ($REDSUP_REALDATA, else ../shared/realdata:
+KITTI object frames 000000-000003, a 10-frame 2011_09_26 raw drive with its real calibration, one TuSimple clip).
+Skipped when that folder is absent; the files are read in place, never copied into the repository.
 """
-import os
 from collections import Counter
 from pathlib import Path
 
@@ -10,7 +9,7 @@ import numpy as np
 import pytest
 import yaml
 
-from conftest import ROOT, run_snakemake
+from conftest import run_snakemake
 from redsup import eval_frame, geometry, sceneio
 from redsup.adapters import adapt_scene, scene_ids
 from redsup.adapters.tusimple import adapt_clips
@@ -22,30 +21,29 @@ from redsup.depth.evaluation import garg_crop_mask
 from redsup.prep.depthmap import lidar_depth_maps
 from redsup.prep.medianflow import track_split
 
-REAL = Path(os.environ.get("REDSUP_REALDATA", ROOT.parent / "shared" / "realdata"))
-pytestmark = pytest.mark.skipif(not REAL.is_dir(), reason=f"real data samples not found at {REAL}")
+pytestmark = pytest.mark.usefixtures("realdata")  # skipped without the real data samples
 
 NO_CROP = {"top": 0, "bottom": 0, "left": 0, "right": 0}
 RAW_SCENE = "test_2011_09_26_drive_0000_sync"
 
 
-def object_spec():
-    return {"kind": "kitti_object", "path": str(REAL / "kitti_object"), "crop": NO_CROP,
+def object_spec(real: Path):
+    return {"kind": "kitti_object", "path": str(real / "kitti_object"), "crop": NO_CROP,
             "resize": {"width": 320, "height": 96}, "instances": {"source": "label_boxes"}}
 
 
-def raw_spec():
-    return {"kind": "kitti_raw", "path": str(REAL / "kitti_raw"), "split": "test", "crop": NO_CROP,
+def raw_spec(real: Path):
+    return {"kind": "kitti_raw", "path": str(real / "kitti_raw"), "split": "test", "crop": NO_CROP,
             "resize": {"width": 320, "height": 96}}
 
 
 @pytest.fixture(scope="module")
-def object_scenes(tmp_path_factory):
+def object_scenes(tmp_path_factory, realdata):
     out = tmp_path_factory.mktemp("kitti_object")
-    ids = scene_ids("kitti_object", object_spec())
+    ids = scene_ids("kitti_object", object_spec(realdata))
     assert ids == ["train_000000", "train_000001", "train_000002", "train_000003"]
     for scene in ids:
-        adapt_scene("kitti_object", object_spec(), scene, out / scene)
+        adapt_scene("kitti_object", object_spec(realdata), scene, out / scene)
     return [out / s for s in ids]
 
 
@@ -134,14 +132,14 @@ def monodepth2_depth(calib_dir: Path, velo_path: Path, verbatim_sub2ind: bool = 
     return depth
 
 
-def test_raw_prepared_depth_equals_the_monodepth2_ground_truth(tmp_path):
+def test_raw_prepared_depth_equals_the_monodepth2_ground_truth(tmp_path, realdata):
     scene = tmp_path / RAW_SCENE
-    assert scene_ids("kitti_raw", raw_spec()) == [RAW_SCENE]
-    assert adapt_scene("kitti_raw", raw_spec(), RAW_SCENE, scene)["frames"] == 10
+    assert scene_ids("kitti_raw", raw_spec(realdata)) == [RAW_SCENE]
+    assert adapt_scene("kitti_raw", raw_spec(realdata), RAW_SCENE, scene)["frames"] == 10
     depth_range = (0.1, 80.0)
     lidar_depth_maps(scene, "cam_front", NO_CROP, depth_range, tmp_path / "depth.npz")  # what rule lidar_depth runs
     ours = np.load(tmp_path / "depth.npz")["depth"]
-    date = REAL / "kitti_raw" / "2011_09_26"
+    date = realdata / "kitti_raw" / "2011_09_26"
     sweeps = sorted((date / "2011_09_26_drive_0000_sync" / "velodyne_points" / "data").glob("*.bin"))
     assert ours.shape == (10, 375, 1242) and len(sweeps) == 10
     for i, sweep in enumerate(sweeps):
@@ -157,8 +155,8 @@ def test_raw_prepared_depth_equals_the_monodepth2_ground_truth(tmp_path):
         assert np.abs(ours[i][crop] - verbatim[crop]).max() < 1e-4
 
 
-def test_medianflow_track_on_the_real_tusimple_clip(tmp_path):
-    source = {"kind": "tusimple", "splits": {"train": {"path": str(REAL / "tusimple_velocity" / "train")}}}
+def test_medianflow_track_on_the_real_tusimple_clip(tmp_path, realdata):
+    source = {"kind": "tusimple", "splits": {"train": {"path": str(realdata / "tusimple_velocity" / "train")}}}
     assert adapt_clips(source, "train", tmp_path / "train")["vehicles"] == 1
     arrays, summary = track_split(tmp_path / "train", {"n_frames": 40, "near": 20.0, "far": 45.0})
     assert summary["n_vehicles"] == 1 and summary["n_medium"] == 1 and not arrays["failed"].any()
@@ -170,11 +168,11 @@ def test_medianflow_track_on_the_real_tusimple_clip(tmp_path):
 
 
 @pytest.mark.workflow
-def test_dag_with_real_datasets_configured(tmp_path):
+def test_dag_with_real_datasets_configured(tmp_path, realdata):
     """Dry run: a kitti_raw and a kitti_object dataset and a TuSimple train split go through the same rules."""
-    extra = {"datasets": {"real_raw": raw_spec(), "real_object": object_spec()},
-             "velocity_clips": {"source": {"kind": "tusimple",
-                                           "splits": {"train": {"path": str(REAL / "tusimple_velocity" / "train")}}}}}
+    clips = str(realdata / "tusimple_velocity" / "train")
+    extra = {"datasets": {"real_raw": raw_spec(realdata), "real_object": object_spec(realdata)},
+             "velocity_clips": {"source": {"kind": "tusimple", "splits": {"train": {"path": clips}}}}}
     cfg = tmp_path / "real.yaml"
     cfg.write_text(yaml.safe_dump(extra))
     raw = f"results/prepared/real_raw/{RAW_SCENE}"

@@ -1,10 +1,9 @@
 """Calibration (McCraith ch. 5) on an adapted KITTI raw scene of the shared real-data sample
-(../shared/realdata/kitti_raw, 10 frames of a 2011_09_26 drive with its real calibration files): the camera
+(`realdata`/kitti_raw, 10 frames of a 2011_09_26 drive with its real calibration files): the camera
 height comes from that scene's extrinsics (checked against the height computed by hand from the KITTI
 calibration files), and a calibration job runs on the scene's real LiDAR ground truth. Skipped when the
 sample is absent; the files are read in place, never copied into the repository.
 """
-import os
 from pathlib import Path
 
 import numpy as np
@@ -12,15 +11,14 @@ import pytest
 
 import yaml
 
-from conftest import ROOT, run_snakemake
+from conftest import run_snakemake
 from redsup import geometry, sceneio
 from redsup.adapters import adapt_scene, scene_ids
 from redsup.calib import inputs, methods
 from redsup.prep import masks_io
 from redsup.prep.depthmap import lidar_depth_maps
 
-REAL = Path(os.environ.get("REDSUP_REALDATA", ROOT.parent / "shared" / "realdata"))
-pytestmark = pytest.mark.skipif(not (REAL / "kitti_raw").is_dir(), reason=f"real data samples not found at {REAL}")
+pytestmark = pytest.mark.usefixtures("realdata")  # skipped without the real data samples
 
 NO_CROP = {"top": 0, "bottom": 0, "left": 0, "right": 0}
 RAW_SCENE = "test_2011_09_26_drive_0000_sync"
@@ -60,21 +58,21 @@ def height_by_hand(date_dir: Path) -> float:
     return float(centre_imu[2] + IMU_HEIGHT)
 
 
-def raw_spec():
-    return {"kind": "kitti_raw", "path": str(REAL / "kitti_raw"), "split": "test", "crop": NO_CROP,
+def raw_spec(real: Path):
+    return {"kind": "kitti_raw", "path": str(real / "kitti_raw"), "split": "test", "crop": NO_CROP,
             "resize": {"width": 320, "height": 96}}
 
 
 @pytest.fixture(scope="module")
-def scene(tmp_path_factory):
+def scene(tmp_path_factory, realdata):
     out = tmp_path_factory.mktemp("kitti_raw") / RAW_SCENE
-    assert scene_ids("kitti_raw", raw_spec()) == [RAW_SCENE]
-    adapt_scene("kitti_raw", raw_spec(), RAW_SCENE, out)
+    assert scene_ids("kitti_raw", raw_spec(realdata)) == [RAW_SCENE]
+    adapt_scene("kitti_raw", raw_spec(realdata), RAW_SCENE, out)
     return out
 
 
-def test_camera_height_of_the_adapted_scene_is_the_one_of_the_kitti_calibration(scene):
-    by_hand = height_by_hand(REAL / "kitti_raw" / "2011_09_26")
+def test_camera_height_of_the_adapted_scene_is_the_one_of_the_kitti_calibration(scene, realdata):
+    by_hand = height_by_hand(realdata / "kitti_raw" / "2011_09_26")
     assert 1.6 < by_hand < 1.7  # KITTI's camera rig: about 1.65 m
     geo = inputs.camera_geometry(scene, "cam_front")
     assert geo["camera_height"] == pytest.approx(by_hand, abs=1e-6)
@@ -99,7 +97,7 @@ def _flat_road_prediction(scene_dir: Path, size=(96, 320), scale=25.0):
     return depth.astype(np.float32), K, road_raw, (w, h)
 
 
-def test_calibration_runs_on_the_adapted_kitti_raw_scene(scene, tmp_path):
+def test_calibration_runs_on_the_adapted_kitti_raw_scene(scene, tmp_path, realdata):
     n = sceneio.read_meta(scene)["n_frames"]
     lidar_depth_maps(scene, "cam_front", NO_CROP, (0.1, 80.0), tmp_path / "gt.npz")  # rule lidar_depth
     depth, K, road_raw, (w, h) = _flat_road_prediction(scene)
@@ -112,7 +110,7 @@ def test_calibration_runs_on_the_adapted_kitti_raw_scene(scene, tmp_path):
     cal = {"length": 30.0, "width": 3.0, "min_points": 20, "lmeds_iterations": 100, "max_tilt_deg": None,
            "fallback": "hold", "eval": {"min_depth": 1e-3, "max_depth": 80.0, "crop": "garg"}}
     result = methods.evaluate_method("road_L30_W3", test, cal, heights=heights, seed=0)
-    assert result["camera_height"] == {scene.name: pytest.approx(height_by_hand(REAL / "kitti_raw" / "2011_09_26"))}
+    assert result["camera_height"] == {scene.name: pytest.approx(height_by_hand(realdata / "kitti_raw" / "2011_09_26"))}
     s = result["summary"]
     assert (s["n_frames"], s["n_not_evaluable"], s["coverage"]) == (n, 0, 1.0)
     # the road plane seen through the real rig at the real height gives back the prediction's scale
@@ -126,20 +124,20 @@ def test_calibration_runs_on_the_adapted_kitti_raw_scene(scene, tmp_path):
 
 
 @pytest.mark.workflow
-def test_dag_calibrates_a_kitti_raw_dataset(tmp_path):
+def test_dag_calibrates_a_kitti_raw_dataset(tmp_path, realdata):
     """Dry run: calibration.dataset set to an adapted KITTI raw dataset (test scenes only) plans
     calibration_eval on its scene, predicted by the model of calibration.model_dataset; the raw scene folder,
     hence its extrinsics, is an input. Without model_dataset the plan fails, naming the key to set."""
     cfg = tmp_path / "real.yaml"
     target = "results/calibration/real_raw/M/road_L30_W3.json"
     cal = {"dataset": "real_raw", "model_dataset": None}
-    cfg.write_text(yaml.safe_dump({"datasets": {"real_raw": raw_spec()}, "calibration": cal}))
+    cfg.write_text(yaml.safe_dump({"datasets": {"real_raw": raw_spec(realdata)}, "calibration": cal}))
     failed = run_snakemake(tmp_path / "w0", "-n", target, "--configfile", str(cfg), check=False)
     assert failed.returncode != 0
     assert "no depth model 'real_raw/M'" in failed.stderr + failed.stdout
     assert "calibration.model_dataset" in failed.stderr + failed.stdout
 
-    cfg.write_text(yaml.safe_dump({"datasets": {"real_raw": raw_spec()},
+    cfg.write_text(yaml.safe_dump({"datasets": {"real_raw": raw_spec(realdata)},
                                    "calibration": {**cal, "model_dataset": "world_kitti"}}))
     out = run_snakemake(tmp_path / "w", "-n", target, "--configfile", str(cfg)).stdout
     assert any(line.split()[:2] == ["calibration_eval", "1"] for line in out.splitlines()), out[-3000:]

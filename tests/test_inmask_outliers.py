@@ -1,8 +1,7 @@
 """In-box / in-mask LiDAR outlier fraction by distance (issue 11 §4, redsup.prep.outliers): by hand on the
-hand-made scene of test_detection, on the genuine KITTI object sample (skipped without ../shared/realdata) and
+hand-made scene of test_detection, on the genuine KITTI object sample (the `realdata` samples; skipped without them) and
 on a tiny rendered world."""
 import copy
-import os
 from pathlib import Path
 
 import numpy as np
@@ -16,12 +15,11 @@ from redsup.world.generate import write_scene as render_scene
 from test_detection import write_scene as hand_scene
 
 ROOT = Path(__file__).resolve().parents[1]
-REAL = Path(os.environ.get("REDSUP_REALDATA", ROOT.parent / "shared" / "realdata"))
 
 
-def _real_scenes(tmp_path, **kwargs):
-    """(scene folder, scene_records) of each frame of the KITTI object sample, adapted into tmp_path."""
-    spec = {"kind": "kitti_object", "path": str(REAL / "kitti_object"),
+def _real_scenes(real: Path, tmp_path, **kwargs):
+    """(scene folder, scene_records) of each frame of the KITTI object sample in `real`, adapted into tmp_path."""
+    spec = {"kind": "kitti_object", "path": str(real / "kitti_object"),
             "crop": {"top": 0, "bottom": 0, "left": 0, "right": 0}, "resize": {"width": 320, "height": 96},
             "instances": {"source": "label_boxes"}}
     return adapted_records("kitti_object", spec, tmp_path, **kwargs)
@@ -56,12 +54,11 @@ def test_outliers_by_hand(tmp_path):
     assert scene_records(scene, "cam_front", use_masks=False)[0]["n_mask"] is None
 
 
-@pytest.mark.skipif(not REAL.is_dir(), reason=f"real data samples not found at {REAL}")
-def test_outliers_on_the_real_kitti_object_sample(tmp_path):
+def test_outliers_on_the_real_kitti_object_sample(tmp_path, realdata):
     """The three labelled cars of frames 000000-000003 (14, 36, 62 m, unoccluded): 28 %, 38 %, 25 % of the
     points in their 2D label box lie outside their 3D box (+ 0.2 m); no masks (instances from label boxes)."""
     recs = []
-    for scene_dir, found in _real_scenes(tmp_path):
+    for scene_dir, found in _real_scenes(realdata, tmp_path):
         boxes = sceneio.read_boxes(scene_dir / "gt" / "boxes.csv")
         for r in found:
             n_lidar = int(boxes.loc[boxes["track_id"] == r["track"], "n_lidar"].iloc[0])
@@ -149,8 +146,7 @@ def test_squared_fit_is_pulled_by_far_outliers():
     assert t[1, 0] - centre[0] > 1.0 and abs(t[1, 1]) < 0.5
 
 
-@pytest.mark.skipif(not REAL.is_dir(), reason=f"real data samples not found at {REAL}")
-def test_real_kitti_outliers_pull_the_squared_fit_metres_away(tmp_path):
+def test_real_kitti_outliers_pull_the_squared_fit_metres_away(tmp_path, realdata):
     """The three real cars' box outliers lie a median 14-16 m from their 3D boxes, and eq. (1)'s own optimum at
     the true yaw lies 3-7 m from the true centre for every one of them (0.2-0.3 m on their inliers alone):
     the thesis' plain squared-loss rows (41.5 / 62.6 AP_BEV moderate) cannot come from eq. (1) on such points."""
@@ -161,7 +157,7 @@ def test_real_kitti_outliers_pull_the_squared_fit_metres_away(tmp_path):
     from redsup.det3d.template import TemplateSpec, build_template
     from redsup.boxes3d import points_in_box
 
-    recs = [r for _, found in _real_scenes(tmp_path, keep_points=True) for r in found]
+    recs = [r for _, found in _real_scenes(realdata, tmp_path, keep_points=True) for r in found]
     assert len(recs) == 3
     for r in recs:
         assert np.median(r["excess_box"]) > 10.0

@@ -4,7 +4,7 @@ scores, localisation and orientation noise and false positives) in tests/data/ki
 port's AP and AOS computed once by tests/data/kitti_official/make_fixture.py (expected.json; the port is not
 vendored).
 
-With the real, tilted KITTI calibration (../shared/realdata; skipped when absent) every box goes through the
+With the real, tilted KITTI calibration (the `realdata` samples; skipped when absent) every box goes through the
 workflow's vehicle frame and back, and the AP must still be the port's.
 """
 import json
@@ -24,9 +24,6 @@ from redsup.det3d.kitti_files import _vehicle_frame, read_folders, read_objects
 
 DATA = ROOT / "tests" / "data" / "kitti_official"
 EXPECTED = json.loads((DATA / "expected.json").read_text())
-REAL = ROOT.parent / "shared" / "realdata"
-CALIB = REAL / "kitti_object" / "training" / "calib" / "000000.txt"
-needs_real = pytest.mark.skipif(not CALIB.is_file(), reason=f"real KITTI calibration not found at {CALIB}")
 
 
 def _ours(argv):
@@ -94,14 +91,14 @@ def test_label_to_vehicle_and_back_is_exact_on_a_tilted_frame():
         assert abs(eval_frame.wrap_angle(got[6] - want[6])) < 1e-9
 
 
-@needs_real
-def test_workflow_path_on_the_real_tilted_calibration_equals_the_official_port(tmp_path):
-    T = _vehicle_frame(CALIB)
+def test_workflow_path_on_the_real_tilted_calibration_equals_the_official_port(tmp_path, realdata):
+    real_calib = realdata / "kitti_object" / "training" / "calib" / "000000.txt"
+    T = _vehicle_frame(real_calib)
     up_vehicle_in_rect = np.linalg.inv(T)[:3, :3] @ np.array([0.0, 0.0, 1.0])
     tilt = math.degrees(math.acos(-up_vehicle_in_rect[1]))
     assert 0.2 < tilt < 1.0, tilt                   # the real calibration is tilted
     calib = tmp_path / "calib"
     calib.mkdir()
     for p in (DATA / "gt").glob("*.txt"):
-        (calib / p.name).symlink_to(CALIB)
+        (calib / p.name).symlink_to(real_calib)
     _assert_equal(_ours(["--gt", str(DATA / "gt"), "--det", str(DATA / "det"), "--calib", str(calib)]), EXPECTED)

@@ -16,7 +16,6 @@ from redsup.sceneio import SceneError
 
 LIDAR_HEIGHT = 1.5
 TRACKING = {"min_score": 0.5, "min_points": 3, "max_distance": 2.0, "max_count_ratio": 2.0}
-REAL_TUSIMPLE = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "tusimple_velocity" / "train"
 
 
 def cluster(centre_vehicle, n: int, seed: int = 0) -> np.ndarray:
@@ -299,9 +298,9 @@ def test_medianflow_bad_clips_are_counted_per_clip_and_name_the_file(tmp_path):
         write_medianflow(only_bad, tmp_path / "b.npz", cfg)
 
 
-@pytest.mark.skipif(not REAL_TUSIMPLE.exists(), reason="real TuSimple sample not available")
-def test_medianflow_on_real_tusimple_clip(tmp_path):
-    summary = write_medianflow(REAL_TUSIMPLE, tmp_path / "m.npz", {"n_frames": 40, "near": 20.0, "far": 45.0})
+def test_medianflow_on_real_tusimple_clip(tmp_path, realdata):
+    summary = write_medianflow(realdata / "tusimple_velocity" / "train", tmp_path / "m.npz",
+                               {"n_frames": 40, "near": 20.0, "far": 45.0})
     with np.load(tmp_path / "m.npz") as d:
         steps = np.abs(np.diff(d["boxes"][0, :, :2], axis=0))
     assert summary["n_vehicles"] == 1 and steps.max() < 10

@@ -13,7 +13,6 @@ from redsup.world.clips import write_clips
 from redsup.world.traffic import headway_queue, lane_offset, relative_speed_ms, stream_speed
 
 ROOT = Path(__file__).resolve().parents[1]
-REAL = ROOT.parent / "shared" / "realdata" / "tusimple_velocity" / "train"
 # std of the relative velocity (v_z, v_x) per bin of the TuSimple velocity TEST annotation (375 vehicles;
 # quoted in issue 11 §2). Used only as the reference the rendered clips are measured against.
 TUSIMPLE_STD = {"near": (1.39, 0.25), "medium": (2.09, 0.27), "far": (2.84, 0.35)}
@@ -84,11 +83,11 @@ def test_rendered_spread_grows_with_distance_like_tusimple(rendered):
         assert ref_x / 2.0 < sx[b] < ref_x * 2.0, (b, sx[b], ref_x)
 
 
-@pytest.mark.skipif(not REAL.exists(), reason="no real TuSimple sample in ../shared/realdata")
-def test_real_sample_lies_within_the_rendered_spread(rendered):
+def test_real_sample_lies_within_the_rendered_spread(realdata, rendered):
     """The real sample holds too few vehicles for a spread of its own (one clip): each real vehicle's
     velocity must lie within 3 rendered standard deviations of its bin's rendered mean."""
-    real = velocity_spread(REAL)
+    clips = realdata / "tusimple_velocity" / "train"
+    real = velocity_spread(clips)
     assert real["n"].sum() >= 1
     ours = [a for p in sorted(rendered.glob("clips/*/annotation.json")) for a in json.loads(p.read_text())]
     oz, ox = np.array([a["position"] for a in ours]).T
@@ -96,7 +95,7 @@ def test_real_sample_lies_within_the_rendered_spread(rendered):
     from redsup.datastats import distance_bin
 
     ob = distance_bin(oz, ox)
-    for p in sorted(REAL.glob("clips/*/annotation.json")):
+    for p in sorted(clips.glob("clips/*/annotation.json")):
         for a in json.loads(p.read_text()):
             (z, x), (vz, vx) = a["position"], a["velocity"]
             m = ob == distance_bin(z, x)
