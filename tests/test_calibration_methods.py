@@ -3,7 +3,8 @@ the same frames for every method, tables with paired bootstrap records."""
 import numpy as np
 import pytest
 
-from redsup.calib import inputs, methods, report
+from redsup.calib import inputs, methods
+from redsup.calib import tables as calib_tables
 from redsup.depth import calibration
 from redsup.prep import masks_io
 from redsup.tables import align, paper_table
@@ -147,7 +148,7 @@ def test_failed_fit_gets_the_fallback_and_every_method_keeps_the_same_frames():
     s = result["summary"]
     assert (s["n_frames"], s["n_fit"], s["coverage"]) == (3, 0, 0.0)
     assert [f["scale"] for f in result["frames"]] == [1.0] * 3 and s["abs_rel"] > 0.9
-    row = report.metrics_row(result)
+    row = calib_tables.metrics_row(result)
     assert row["frames"] == 3 and row["coverage"] == 0.0
 
 
@@ -293,12 +294,12 @@ def test_tables_use_the_paper_row_and_column_names_and_carry_paired_bootstrap_re
     fig1 = plan.table_frame("mccraith_ch5_fig1", cfg_note, rows["mccraith_ch5_fig1"],
                             {r[1]: series for r in rows["mccraith_ch5_fig1"]})
     assert fig1.note.endswith("No frame skipped. why it spans 2x (box 30 m)")
-    assert fig1.ours.loc[report.FIG1_GT_ROW, "max/min"] == pytest.approx(2.0)
-    fig = report.fig1_table([20.0, 40.0, None], [21.0, 38.0, 30.0], 30.0, road_gt=[20.0, 38.0, 33.0])
-    assert fig.loc[report.FIG1_GT_ROW, "max/min"] == pytest.approx(2.0)
-    assert fig.loc[report.FIG1_OURS_ROW, "median |x / GT - 1|"] == pytest.approx(0.05)
-    assert fig.loc[report.FIG1_SINGLE_ROW, "median |x / GT - 1|"] == pytest.approx(0.375)
-    assert fig.loc[report.FIG1_OURS_ROW, "median |ours / road GT - 1|"] == pytest.approx(0.05)
+    assert fig1.ours.loc[calib_tables.FIG1_GT_ROW, "max/min"] == pytest.approx(2.0)
+    fig = calib_tables.fig1_table([20.0, 40.0, None], [21.0, 38.0, 30.0], 30.0, road_gt=[20.0, 38.0, 33.0])
+    assert fig.loc[calib_tables.FIG1_GT_ROW, "max/min"] == pytest.approx(2.0)
+    assert fig.loc[calib_tables.FIG1_OURS_ROW, "median |x / GT - 1|"] == pytest.approx(0.05)
+    assert fig.loc[calib_tables.FIG1_SINGLE_ROW, "median |x / GT - 1|"] == pytest.approx(0.375)
+    assert fig.loc[calib_tables.FIG1_OURS_ROW, "median |ours / road GT - 1|"] == pytest.approx(0.05)
 
 
 def test_plan_lists_the_jobs_as_data():

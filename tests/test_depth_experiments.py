@@ -8,7 +8,8 @@ import torch
 import yaml
 
 from redsup import config as config_mod
-from redsup.depth import configs, data, experiments, networks, plan, reporting
+from redsup.depth import configs, data, experiments, networks, plan
+from redsup.depth import tables as depth_tables
 from redsup.depth.configs import EvalSpec, Row
 
 torch.set_num_threads(1)
@@ -221,7 +222,7 @@ def test_table_frame_averages_common_frames():
     res_a = {"records": [rec(1, 0, 0.2), rec(3, 0, 0.4), rec(1, 5, 0.1), rec(3, 5, 0.3)]}
     res_b = {"records": [rec(0, 5, reason="missing neighbour"), rec(1, 5, 0.15), rec(2, 5, 0.9), rec(3, 5, 0.25)]}
     rows = [Row("base", spec_a, 0, "g"), Row("inst", spec_a, 5, "g"), Row("seq", spec_b, 5, "g")]
-    df, noise, info = reporting.table_frame(rows, [res_a, res_a, res_b], time_column="time [s]")
+    df, noise, info = depth_tables.table_frame(rows, [res_a, res_a, res_b], time_column="time [s]")
     assert df.loc["base", "Abs Rel"] == pytest.approx(0.3) and df.loc["seq", "Abs Rel"] == pytest.approx(0.2)
     # paired bootstrap over the group's common frames (s/1, s/3): the same units for every row
     assert len({noise[r]["Abs Rel"]["units"] for r in ("base", "inst", "seq")}) == 1
@@ -231,7 +232,7 @@ def test_table_frame_averages_common_frames():
     assert np.allclose(np.array(reps) - inst, 0.1)  # inst is 0.1 better on both frames: every replicate
     assert list(df["frames"]) == [2, 2, 2] and list(df["skipped"]) == [0, 0, 1]
     assert df.loc["inst", "time [s]"] == pytest.approx(0.5) and info["groups"] == {"g": 2}
-    assert reporting.last_quarter(rows, [res_a, res_a, res_b]) == pytest.approx([0.4, 0.3, 0.25])
+    assert depth_tables.last_quarter(rows, [res_a, res_a, res_b]) == pytest.approx([0.4, 0.3, 0.25])
 
 
 def test_stereo_models_use_the_fixed_baseline_factor():

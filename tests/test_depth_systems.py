@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 import torch
 
-from redsup.depth import checkpoint, data, experiments, featdepth, losses, manydepth, networks, reporting, systems, training
+from redsup.depth import checkpoint, data, experiments, featdepth, losses, manydepth, networks, systems, training
+from redsup.depth import tables as depth_tables
 from redsup.depth.configs import EvalSpec, Row, train_settings
 
 torch.set_num_threads(1)
@@ -112,7 +113,7 @@ def test_fps_column_is_one_over_the_mean_seconds():
     rec = [{"sequence": "s", "frame": f, "step": 0, "seconds": s, "metrics": {"abs_rel": 0.1, "sq_rel": 0.1,
             "rmse": 1.0, "rmse_log": 0.1, "a1": 0.9, "a2": 0.95, "a3": 0.99}} for f, s in enumerate([0.02, 0.03])]
     row = Row("Manydepth", EvalSpec("instance", "d/MD", "d/test", "all"))
-    df, _, _ = reporting.table_frame([row], [{"records": rec}], fps_column="FPS")
+    df, _, _ = depth_tables.table_frame([row], [{"records": rec}], fps_column="FPS")
     assert df.at["Manydepth", "FPS"] == pytest.approx(40.0)
 
 

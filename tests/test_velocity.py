@@ -21,7 +21,6 @@ from redsup.velocity.synthetic import box_size, fit_statistics, generate_tracks
 
 CAL = geometry.Calibration(fx=714.0, fy=710.0, cx=640.0, cy=360.0, height=1.8)
 FPS = 20.0
-REAL_TUSIMPLE = Path(__file__).resolve().parents[2] / "shared" / "realdata" / "tusimple_velocity" / "train"
 
 
 @pytest.fixture()
@@ -104,13 +103,13 @@ def test_read_calibration_ours_and_tusimple(tmp_path):
         geometry.read_calibration(tmp_path / "nowhere")
 
 
-@pytest.mark.skipif(not REAL_TUSIMPLE.exists(), reason="real TuSimple sample not available")
-def test_real_tusimple_calibration_reads_and_eq1_is_defined():
-    cal = geometry.read_calibration(REAL_TUSIMPLE)
+def test_real_tusimple_calibration_reads_and_eq1_is_defined(realdata):
+    clips = realdata / "tusimple_velocity" / "train"
+    cal = geometry.read_calibration(clips)
     assert (cal.fx, cal.fy, cal.cx, cal.cy, cal.height) == (714.1526, 710.3725, 675.5754, 376.2563, 1.8)
     import json
 
-    vehicle = json.loads((REAL_TUSIMPLE / "clips" / "1" / "annotation.json").read_text())[0]
+    vehicle = json.loads((clips / "clips" / "1" / "annotation.json").read_text())[0]
     b = vehicle["bbox"]
     box = np.array([b["left"], b["top"], b["right"] - b["left"], b["bottom"] - b["top"]])
     X, Z, valid = geometry.box_ground_point(box, cal)
@@ -330,7 +329,8 @@ def test_table_frames_use_the_paper_labels():
 def test_seed_runs_and_seed_rows(tmp_path):
     """MLP configurations run once per seed and their row is the seed mean with the seed spread; rows
     without learning get a paired bootstrap over the test vehicles."""
-    from redsup.velocity import plan, report
+    from redsup.velocity import plan
+    from redsup.velocity import tables as velocity_tables
 
     config = {"profile": "tiny", "velocity": {
         "seeds": 3, "configurations": [{"name": "geometric", "label": "geometric reprojection", "method": "geometric"},
@@ -351,7 +351,7 @@ def test_seed_runs_and_seed_rows(tmp_path):
 
     results = {"geometric": record(4.0, [1.0, 3.0, 7.0, 9.0]), "mlp_tracker": record(1.0, [1] * 4),
                "mlp_tracker_seed1": record(2.0, [2] * 4), "mlp_tracker_seed2": record(3.0, [3] * 4)}
-    ours, noise = report.configuration_table("errors", rows, results)
+    ours, noise = velocity_tables.configuration_table("errors", rows, results)
     assert ours.at["Ours (MLP-tracker)", "E_v"] == pytest.approx(2.0)
     rec = noise["Ours (MLP-tracker)"]["E_v"]
     assert rec["kind"] == "seeds" and rec["values"] == [1.0, 2.0, 3.0]
@@ -361,9 +361,9 @@ def test_seed_runs_and_seed_rows(tmp_path):
     geo = noise["geometric reprojection"]["E_v^far"]
     assert geo["kind"] == "bootstrap" and set(np.round(geo["values"], 6)) <= {7.0, 8.0, 9.0}
     # E_v of the full sample by hand: bins near 1, medium 3, far (7 + 9) / 2 = 8 -> mean 4
-    assert report._binned({f"0/{i}": v for i, v in enumerate([1.0, 3.0, 7.0, 9.0])},
-                          {f"0/{i}": b for i, b in enumerate([0, 1, 2, 2])}, [f"0/{i}" for i in range(4)],
-                          None) == pytest.approx(4.0)
+    assert velocity_tables._binned({f"0/{i}": v for i, v in enumerate([1.0, 3.0, 7.0, 9.0])},
+                                   {f"0/{i}": b for i, b in enumerate([0, 1, 2, 2])}, [f"0/{i}" for i in range(4)],
+                                   None) == pytest.approx(4.0)
 
 
 def test_configured_tables_share_runs_and_seed_counts():
@@ -591,7 +591,7 @@ def test_relative_box_features_by_hand():
 
 def test_table_caption_states_the_render_and_the_epoch_kept():
     from redsup import config as rconfig
-    from redsup.velocity.report import table_note
+    from redsup.velocity.tables import table_note
 
     cfg = rconfig.load(Path(__file__).resolve().parents[1] / "config.yaml", {"profile": "default"})
     tcfg = cfg["velocity"]["tables"]["mccraith_ch3_table2"]

@@ -6,7 +6,7 @@ sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821
 
 from pathlib import Path  # noqa: E402
 
-from redsup.calib import report  # noqa: E402
+from redsup.calib import tables as calib_tables  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
 from redsup.sceneio import read_json  # noqa: E402
 
@@ -19,8 +19,8 @@ with child_run(sm.log.run, figure, "figure", rule=sm.rule, wildcards=dict(sm.wil
     names = list(dict.fromkeys(f["scene"] for f in frames))
     title = (f"Per-frame GT scaling factor of the raw monocular depth ({series['mode']}), "
              f"{series['dataset']} {', '.join(names)}")
-    fig = report.fig1_plot([f["t"] for f in frames], [f["gt"] for f in frames], [f["ours"] for f in frames],
-                           series["single_scale"], title, [f["road_gt"] for f in frames])
+    fig = calib_tables.fig1_plot([f["t"] for f in frames], [f["gt"] for f in frames], [f["ours"] for f in frames],
+                                 series["single_scale"], title, [f["road_gt"] for f in frames])
     tmp = Path(sm.output.png).with_name(f"{figure}.part.png")
     fig.savefig(tmp, dpi=110)
     tmp.replace(sm.output.png)

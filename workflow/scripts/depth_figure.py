@@ -4,7 +4,8 @@ import sys
 
 sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821  (log first)
 
-from redsup.depth import plan, reporting  # noqa: E402
+from redsup.depth import plan  # noqa: E402
+from redsup.depth import tables as depth_tables  # noqa: E402
 from redsup.runlog import child_run  # noqa: E402
 from redsup.sceneio import read_json  # noqa: E402
 
@@ -14,8 +15,8 @@ tcfg = sm.config["depth"]["tables"][figure_id]
 by_label = {r.label: r for r in plan.expand_rows(figure_id, sm.config["depth"])}
 rows = [by_label[label] for label, _, _ in sm.params.rows]
 results = [read_json(plan.result_path(run)) for _, run, _ in sm.params.rows]
-DRAW = {"per_frame": lambda: reporting.fig4(rows, results),
-        "steps": lambda: reporting.fig5(rows, results, reporting.table_frame(rows, results)[0])}
+DRAW = {"per_frame": lambda: depth_tables.fig4(rows, results),
+        "steps": lambda: depth_tables.fig5(rows, results, depth_tables.table_frame(rows, results)[0])}
 with child_run(sm.log.run, figure_id, "figure", rule=sm.rule, wildcards=dict(sm.wildcards), config=sm.config) as run:
     fig = DRAW[tcfg["figure"]]()
     fig.savefig(sm.output[0], dpi=110)

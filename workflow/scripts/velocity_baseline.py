@@ -10,7 +10,7 @@ from redsup.runlog import child_run  # noqa: E402
 from redsup.velocity import plan  # noqa: E402
 from redsup.velocity.data import load_split  # noqa: E402
 from redsup.velocity.experiment import run_constant, run_geometric  # noqa: E402
-from redsup.velocity.report import write_configuration_outputs  # noqa: E402
+from redsup.velocity.tables import write_configuration_outputs  # noqa: E402
 
 sm = snakemake  # noqa: F821
 vcfg = sm.config["velocity"]

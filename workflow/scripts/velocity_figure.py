@@ -11,7 +11,7 @@ import numpy as np  # noqa: E402
 
 from redsup.runlog import child_run  # noqa: E402
 from redsup.velocity.geometry import Calibration  # noqa: E402
-from redsup.velocity.report import save_figure  # noqa: E402
+from redsup.velocity.tables import save_figure  # noqa: E402
 from redsup.velocity.summary import plot_fig3, plot_fig6  # noqa: E402
 
 sm = snakemake  # noqa: F821

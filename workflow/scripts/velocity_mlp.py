@@ -21,7 +21,7 @@ from redsup.velocity import plan  # noqa: E402
 from redsup.velocity.data import load_split  # noqa: E402
 from redsup.velocity.experiment import run_mlp  # noqa: E402
 from redsup.velocity.mlp import resolve_device, save_model  # noqa: E402
-from redsup.velocity.report import write_configuration_outputs  # noqa: E402
+from redsup.velocity.tables import write_configuration_outputs  # noqa: E402
 
 sm = snakemake  # noqa: F821
 vcfg = sm.config["velocity"]

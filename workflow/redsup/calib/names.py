@@ -10,7 +10,7 @@ def road_method(length: float, width: float) -> str:
     return f"road_L{float(length):g}_W{float(width):g}"
 
 
-# row labels of a series table (redsup.calib.report.fig1_table)
+# row labels of a series table (redsup.calib.tables.fig1_table)
 FIG1_GT_ROW = "per-frame GT scaling factor"
 FIG1_SINGLE_ROW = "GT Single Scaling (training set)"
 FIG1_OURS_ROW = "Ours (road plane, per frame)"

@@ -139,21 +139,21 @@ def figure_series(config: Mapping) -> dict[str, str]:
 # ------------------------------------------------------------------------------------ the table
 def table_frame(table_id: str, config: Mapping, rows: Sequence[tuple], results: Mapping[str, Mapping]):
     """Our table: method rows with a paired bootstrap over the common test frames, or a series summary."""
-    from redsup.calib import report
+    from redsup.calib import tables as calib_tables
     from redsup.tables.contract import TableFrame
 
     cal = config["calibration"]
     tcfg = cal["tables"][table_id]
     if "series" in tcfg:
         (_, run, _), = {r[1]: r for r in rows}.values()
-        ours, note = report.series_frame(results[run], cal, config.get("profile"))
+        ours, note = calib_tables.series_frame(results[run], cal, config.get("profile"))
         if tcfg.get("note"):
             note += ". " + str(tcfg["note"]).format(length=float(cal["length"]), width=float(cal["width"])).rstrip(".")
         return TableFrame(ours, {}, note)
-    ours, noise, info = report.method_frame([(label, results[run]) for label, run, _ in rows],
-                                            index=VARY_INDEX.get(tcfg.get("vary"), "Method"))
+    ours, noise, info = calib_tables.method_frame([(label, results[run]) for label, run, _ in rows],
+                                                  index=VARY_INDEX.get(tcfg.get("vary"), "Method"))
     what = str(tcfg.get("note", "")).format(length=float(cal["length"]), width=float(cal["width"]))
-    return TableFrame(ours, noise, report.method_note(info, cal, config.get("profile"), what))
+    return TableFrame(ours, noise, calib_tables.method_note(info, cal, config.get("profile"), what))
 
 
 __all__ = ["METHOD_PATTERN", "road_method", "table_methods", "rows", "runs", "result_path", "table_frame",

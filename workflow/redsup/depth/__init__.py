@@ -16,5 +16,5 @@ Modules (each pure and small; import the one you need, nothing is re-exported he
 - ``training``    the Monodepth2 training loop (Adam, step decay)
 - ``configs``     the tables' configurations as data (torch-free): rows, shared runs, captions
 - ``experiments`` runners of one configuration: instance-wise / sequential adaptation, direct optimisation
-- ``reporting``   tables (rows averaged over common frames) and Figs. 4-5 from the runs' per-frame records
+- ``tables``      tables (rows averaged over common frames) and Figs. 4-5 from the runs' per-frame records
 """

@@ -236,7 +236,7 @@ def table_frame(table_id: str, config: Mapping, rows: Sequence[tuple], results: 
     several training seeds (several runs under one label) is the mean over seeds with their spread."""
     import numpy as np
 
-    from redsup.depth import reporting
+    from redsup.depth import tables as depth_tables
     from redsup.tables import noise as noise_lib
     from redsup.tables.contract import TableFrame
 
@@ -252,17 +252,17 @@ def table_frame(table_id: str, config: Mapping, rows: Sequence[tuple], results: 
         per_seed[k].append((label, run))
     frames, infos = [], []
     for k, seed_rows in enumerate(per_seed):
-        df, noise, info = reporting.table_frame([by_label[label] for label, _ in seed_rows],
-                                                [results[run] for _, run in seed_rows],
-                                                time_column=tcfg.get("time_column"),
-                                                with_last_quarter=bool(tcfg.get("last_quarter", False)),
-                                                fps_column=tcfg.get("fps_column"))
+        df, noise, info = depth_tables.table_frame([by_label[label] for label, _ in seed_rows],
+                                                   [results[run] for _, run in seed_rows],
+                                                   time_column=tcfg.get("time_column"),
+                                                   with_last_quarter=bool(tcfg.get("last_quarter", False)),
+                                                   fps_column=tcfg.get("fps_column"))
         frames.append((df, noise))
         infos.append(info)
     models = [by_label[label].spec.model for label, _, _ in rows]
     timing = next((results[run]["timing"] for _, run, _ in rows if results[run].get("timing")), None)
     if not frames:
-        return TableFrame(reporting.table_frame([], [])[0], {}, table_note(config, tcfg, {}, 1, models, timing))
+        return TableFrame(depth_tables.table_frame([], [])[0], {}, table_note(config, tcfg, {}, 1, models, timing))
     ours, noise = frames[0][0].copy(), dict(frames[0][1])
     for label, n in seen.items():
         if n < 2:

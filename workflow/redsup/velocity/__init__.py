@@ -9,6 +9,8 @@
 - `synthetic`: the §IV-B generator fitted on the training clips;
 - `metrics`: the TuSimple protocol (E_v per distance bin and overall, E_p);
 - `experiment`: one configuration end to end; `summary`: our tables and Fig. 3 / Fig. 6;
+- `tables`: the tables' frames and captions from the configurations' metrics (what `plan.table_frame`
+  calls); it also writes each configuration's metrics / predictions files and saves the figures;
 - `spread`: the relative-velocity spread per bin of a clip split (the clips' traffic model is measured by it);
 - `select`: the knob sweep on the val clips.
 """

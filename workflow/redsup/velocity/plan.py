@@ -85,13 +85,13 @@ def parent(config: Mapping, name: str) -> str:
 
 def table_frame(table_id: str, config: Mapping, rows: Sequence[tuple], results: Mapping[str, Mapping]):
     from redsup.tables.contract import TableFrame
-    from redsup.velocity import report
+    from redsup.velocity import tables as velocity_tables
 
     tc = config["velocity"]["tables"][table_id]
     if "rows" in tc:
-        ours, noise = report.configuration_table(tc["layout"], rows, results)
+        ours, noise = velocity_tables.configuration_table(tc["layout"], rows, results)
     elif "counts" in tc:
-        ours, noise = report.counts_table(results["clip_counts"]), {}
+        ours, noise = velocity_tables.counts_table(results["clip_counts"]), {}
     else:
-        ours, noise = report.figure_table(results[f"figure_{table_id}"]), {}
-    return TableFrame(ours, noise, report.table_note(config, tc, results))
+        ours, noise = velocity_tables.figure_table(results[f"figure_{table_id}"]), {}
+    return TableFrame(ours, noise, velocity_tables.table_note(config, tc, results))
