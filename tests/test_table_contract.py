@@ -77,9 +77,10 @@ def test_exactly_one_rule_writes_the_tables():
             output = m.group(2).split("log:")[0]
             if re.search(r'"results/tables/[^"]*\.md"', output):
                 writers.append((smk.name, m.group(1)))
-    # besides the one table rule: the scorecard and the run-time summary (fixed outputs, no thesis table)
-    assert sorted(writers) == [("benchmarks.smk", "benchmark_summary"), ("tables.smk", "scorecard"),
-                               ("tables.smk", "table")]
+    # besides the one table rule: the scorecard, the power report and the run-time summary (fixed outputs, no
+    # thesis table)
+    assert sorted(writers) == [("benchmarks.smk", "benchmark_summary"), ("tables.smk", "power"),
+                               ("tables.smk", "scorecard"), ("tables.smk", "table")]
 
 
 @pytest.mark.parametrize("folder", ["workflow/scripts", "workflow/redsup"])
