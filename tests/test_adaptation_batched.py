@@ -237,6 +237,11 @@ def test_run_instance_batched_records_equal_one_at_a_time(groups):
     steps = {(r["frame"], r["step"]): r for r in many}
     assert steps[(1, 0)]["metrics"]["abs_rel"] != steps[(1, 3)]["metrics"]["abs_rel"]
     assert steps[(1, 3)]["seconds"] > steps[(1, 0)]["seconds"]
+    # batches of 2: frames 1 + 2 together, frame 3 alone, which takes the one-at-a-time path (the same bits)
+    pairs, _ = experiments.run_instance(models, meta, [seq], frames, batch_size=2, **kw)
+    assert [r.get("metrics") for r in pairs if r["frame"] == 3] == [r.get("metrics") for r in one if r["frame"] == 3]
+    assert [r["metrics"]["abs_rel"] for r in pairs if r["frame"] == 1] == pytest.approx(
+        [r["metrics"]["abs_rel"] for r in one if r["frame"] == 1], rel=RTOL)   # kernels differ by batch size
 
 
 def test_batch_chunks_follow_size_and_signature():

@@ -140,10 +140,14 @@ def frame_loss(loss_kwargs: Mapping, seed: int) -> Callable:
 
 # Frames an instance-wise run adapts at once (``adaptation.adapt_batched``) unless ``depth.eval.instance_batch``
 # says otherwise; 1 = one frame at a time (``adaptation.adapt``). Same numbers per frame up to float rounding.
-# 1: batching is no faster on CPU at the default profile's size (benchmarks/bench_adaptation_batched.py, 64 x 208,
-# width 16, 1 thread, medians of 5: 1.03 frames/s one at a time, 0.87 / 0.93 / 0.92 / 1.03 batched by 1 / 4 / 8 / 16;
-# CPU time 0.84-1.10x): the photometric loss and the warping are half of a step and cost the same per frame
-# batched, and the adapted encoders' per-copy weight gradients (grouped convolutions) cost what K small ones do.
+# 1: batching is no faster on CPU at the default profile's size (benchmarks/bench_adaptation_batched.py: 64 x 208,
+# width 16, depth + pose encoders, 1 thread, 16 frames x 5 steps, medians of 5 repeats on 2 shared cores, two runs):
+# CPU time per frame 0.94-1.10x of one at a time's for batches of 4 / 8 / 16 (a batch of 1: 0.75-0.84x); the
+# wall-time medians scattered from 0.89x to 1.50x with the machine's load, the fastest repeats did not (0.54-0.56 s
+# a frame for one at a time and batches of 4-16 in the quieter run). The photometric loss and the warping are half of a step and cost the same per frame batched,
+# and the adapted encoders' per-copy weight gradients (grouped convolutions) cost what K separate ones do. At the
+# tiny profile's size (32 x 104, width 8), where per-operation overhead dominates, batches of 8 / 16 take 1.7x /
+# 2.1x less CPU time, but the tiny runs adapt one frame each.
 INSTANCE_BATCH = 1
 
 
@@ -168,108 +172,100 @@ def run_instance(models: Mapping[str, nn.Module], meta: Mapping, seqs: Seq[EvalS
     ``seconds`` of a checkpoint = adaptation time so far + the prediction. Without ``sources`` (prediction
     only) no sample is needed. Returns (records, mean adaptation loss per step over the adapted frames).
 
-    ``batch_size`` (None: ``INSTANCE_BATCH``) consecutive adapted frames run as one batched optimisation
-    (``adaptation.adapt_batched``, Monodepth2 models): the same records up to float rounding, in the same order;
-    1 adapts one frame at a time."""
+    ``batch_size`` (None: ``INSTANCE_BATCH``): up to that many consecutive complete samples (of one size) are
+    adapted as one batched optimisation (``adaptation.adapt_batched``; Monodepth2 models), with the same
+    records up to float rounding, in the same order; a batch of one frame, and ``batch_size`` 1, take the
+    one-at-a-time path (``adaptation.adapt``)."""
     checkpoints = sorted(set(int(c) for c in checkpoints))
     n_steps = checkpoints[-1]
     batch_size = INSTANCE_BATCH if batch_size is None else int(batch_size)
-    if batch_size > 1 and sources and n_steps > 0 and _batched(meta):
-        return _run_instance_batched(models, meta, seqs, frames, sources=sources, groups=groups, lr=lr,
-                                     checkpoints=checkpoints, eval_cfg=eval_cfg, loss_kwargs=loss_kwargs,
-                                     metric_scale=metric_scale, progress=progress, branch=branch,
-                                     batch_size=batch_size)
+    batched = batch_size > 1 and bool(sources) and n_steps > 0 and _batched(meta)
     state = adaptation.snapshot(models)
     params = adaptation.select_parameters(models, groups) if groups else []
-    records: list[dict] = []
+    per_frame: list[list[dict]] = [[] for _ in frames]   # each frame's records, joined in frame order
     loss_sum, loss_n = np.zeros(n_steps), 0
+    pending: list[tuple[int, int, int, dict]] = []   # (position in frames, sequence index, frame, sample)
+
+    def one(n: int, i: int, t: int, batch: dict) -> None:
+        es = seqs[i]
+        nonlocal loss_sum, loss_n
+        adaptation.load_snapshot(models, state)
+
+        def on_step(step, loss, elapsed):
+            if step in checkpoints:
+                start = time.perf_counter()
+                pred = _predict(models, batch, meta, branch)
+                secs = elapsed + time.perf_counter() - start
+                per_frame[n].append(_record(es, t, step, evaluate_depth(es.gt[t], pred, eval_cfg, metric_scale),
+                                            secs))
+
+        if n_steps == 0 or not sources:
+            for m in models.values():
+                m.eval()
+            on_step(0, None, 0.0)
+        else:
+            hist = adaptation.adapt(models, frame_loss(loss_kwargs, 1000 * i + t), batch, params, lr, n_steps,
+                                    on_step)
+            loss_sum += np.nan_to_num(np.asarray(hist, dtype=float), nan=0.0, posinf=0.0)
+            loss_n += 1
+
+    def together(chunk: list[tuple[int, int, int, dict]]) -> None:
+        nonlocal loss_sum, loss_n
+        gens = [frame_generator(loss_kwargs, 1000 * i + t) for _, i, t, _ in chunk]
+        loss_fn = functools.partial(pipeline.batch_loss, **{k: v for k, v in loss_kwargs.items() if k != "generator"})
+        predict = functools.partial(_predict_tensor, meta=meta, branch=branch)
+
+        def on_step(step, losses, elapsed, copies):
+            if step in checkpoints:
+                start = time.perf_counter()
+                preds = copies.map(predict)
+                # a batch's seconds are shared equally by its frames: (the batch's adaptation time so far + its
+                # prediction time) / its frame count, the per-frame cost of adapting them together
+                secs = (elapsed + time.perf_counter() - start) / len(chunk)
+                for (n, i, t, _), pred in zip(chunk, preds):
+                    es = seqs[i]
+                    per_frame[n].append(_record(es, t, step, evaluate_depth(
+                        es.gt[t], pred[0, 0].detach().cpu().numpy(), eval_cfg, metric_scale), secs))
+
+        hists, _ = adaptation.adapt_batched(models, loss_fn, [b for *_, b in chunk], params, lr, n_steps, on_step,
+                                            None if any(g is None for g in gens) else gens)
+        for hist in hists:
+            loss_sum += np.nan_to_num(np.asarray(hist, dtype=float), nan=0.0, posinf=0.0)
+            loss_n += 1
+
+    def flush() -> None:
+        if len(pending) == 1:   # alone: the plain path (vmap costs 25-40 % more CPU for one frame)
+            one(*pending[0])
+        elif pending:
+            together(pending)
+        if progress is not None:
+            for n, *_ in pending:
+                progress(n + 1, len(frames))
+        pending.clear()
+
     try:
         for n, (i, t) in enumerate(frames):
             es = seqs[i]
             if sources:
                 batch = data.eval_sample(es.seq, t, sources)
                 if isinstance(batch, str):
-                    records += [_record(es, t, k, None, None, batch) for k in checkpoints]
+                    per_frame[n] += [_record(es, t, k, None, None, batch) for k in checkpoints]
                     continue
             else:
                 batch = prediction_batch(es.seq, t, meta, branch)
-            adaptation.load_snapshot(models, state)
-
-            def on_step(step, loss, elapsed, es=es, t=t, batch=batch):
-                if step in checkpoints:
-                    start = time.perf_counter()
-                    pred = _predict(models, batch, meta, branch)
-                    secs = elapsed + time.perf_counter() - start
-                    records.append(_record(es, t, step, evaluate_depth(es.gt[t], pred, eval_cfg, metric_scale), secs))
-
-            if n_steps == 0 or not sources:
-                for m in models.values():
-                    m.eval()
-                on_step(0, None, 0.0)
-            else:
-                hist = adaptation.adapt(models, frame_loss(loss_kwargs, 1000 * i + t), batch, params, lr, n_steps,
-                                        on_step)
-                loss_sum += np.nan_to_num(np.asarray(hist, dtype=float), nan=0.0, posinf=0.0)
-                loss_n += 1
-            if progress is not None:
-                progress(n + 1, len(frames))
+            if not batched:
+                one(n, i, t, batch)
+                if progress is not None:
+                    progress(n + 1, len(frames))
+                continue
+            if pending and (len(pending) >= batch_size
+                            or adaptation.sample_signature(batch) != adaptation.sample_signature(pending[0][3])):
+                flush()
+            pending.append((n, i, t, batch))
+        flush()
     finally:
         adaptation.load_snapshot(models, state)
-    return records, (loss_sum / max(loss_n, 1)).tolist()
-
-
-def _run_instance_batched(models, meta, seqs, frames, *, sources, groups, lr, checkpoints, eval_cfg, loss_kwargs,
-                          metric_scale, progress, branch, batch_size) -> tuple[list[dict], list[float]]:
-    """``run_instance`` with up to ``batch_size`` consecutive complete samples adapted at once."""
-    n_steps = checkpoints[-1]
-    params = adaptation.select_parameters(models, groups) if groups else []
-    loss_fn = functools.partial(pipeline.batch_loss, **{k: v for k, v in loss_kwargs.items() if k != "generator"})
-    per_frame: list[list[dict]] = [[] for _ in frames]   # records in frame order, as one at a time
-    loss_sum, loss_n = np.zeros(n_steps), 0
-    pending: list[tuple[int, int, int, dict]] = []   # (position in frames, sequence index, frame, sample)
-
-    def flush() -> None:
-        nonlocal loss_sum, loss_n
-        if not pending:
-            return
-        gens = [frame_generator(loss_kwargs, 1000 * i + t) for _, i, t, _ in pending]
-        gens = None if any(g is None for g in gens) else gens
-
-        def on_step(step, losses, elapsed, copies):
-            if step in checkpoints:
-                start = time.perf_counter()
-                preds = copies.map(functools.partial(_predict_tensor, meta=meta, branch=branch))
-                # a batch's seconds are shared equally by its frames: (the batch's adaptation time so far + its
-                # prediction time) / its frame count, the per-frame cost of adapting them together
-                secs = (elapsed + time.perf_counter() - start) / len(pending)
-                for (pos, i, t, _), pred in zip(pending, preds):
-                    es = seqs[i]
-                    per_frame[pos].append(_record(es, t, step, evaluate_depth(
-                        es.gt[t], pred[0, 0].detach().cpu().numpy(), eval_cfg, metric_scale), secs))
-
-        hists, _ = adaptation.adapt_batched(models, loss_fn, [b for *_, b in pending], params, lr, n_steps,
-                                            on_step, gens)
-        for hist in hists:
-            loss_sum += np.nan_to_num(np.asarray(hist, dtype=float), nan=0.0, posinf=0.0)
-            loss_n += 1
-        if progress is not None:
-            for pos, *_ in pending:
-                progress(pos + 1, len(frames))
-        pending.clear()
-
-    for n, (i, t) in enumerate(frames):
-        es = seqs[i]
-        batch = data.eval_sample(es.seq, t, sources)
-        if isinstance(batch, str):
-            per_frame[n] += [_record(es, t, k, None, None, batch) for k in checkpoints]
-            continue
-        if pending and (len(pending) >= batch_size
-                        or adaptation.sample_signature(batch) != adaptation.sample_signature(pending[0][3])):
-            flush()
-        pending.append((n, i, t, batch))
-    flush()
-    records = [r for recs in per_frame for r in recs]
-    return records, (loss_sum / max(loss_n, 1)).tolist()
+    return [r for recs in per_frame for r in recs], (loss_sum / max(loss_n, 1)).tolist()
 
 
 def run_sequential(models: Mapping[str, nn.Module], meta: Mapping, seqs: Seq[EvalSequence], *,
