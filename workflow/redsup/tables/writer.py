@@ -349,7 +349,8 @@ def write_scorecard(score_jsons: Iterable[str | Path], out_md, registry: dict | 
           "work, real data, or contradicted by the thesis' own table) and **data description** (true by how "
           "the data were configured) are listed but not counted as results. Kendall τ = tau-b of our row "
           "ordering vs the paper's on the headline metric (n = rows in both).", "",
-          f"**Total: {_counts_text(total)}** — {total['reproduces']} of {tested} testable claims reproduce"
+          f"**Total: {_counts_text(total)}**", "",
+          f"{total['reproduces']} of {tested} counted claims reproduce"
           + (f"; mean τ {sum(taus) / len(taus):+.3f} over {len(taus)} tables." if taus else "."), "",
           "| stage | " + head + " |", "|:---|" + "---:|" * len(VERDICTS)]
     for stage, c in by_stage.items():
