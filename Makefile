@@ -4,7 +4,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 PROFILE ?= default
 
-.PHONY: venv browser reproduce test lint dry-run mlflow mlflow-sync report rulegraph run-time readme-results clean
+.PHONY: venv browser reproduce test cluster-test lint dry-run mlflow mlflow-sync report rulegraph run-time readme-results clean
 
 $(BIN)/snakemake: pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -29,6 +29,12 @@ browser:
 ## The test suite (what CI runs: .ci/run)
 test: venv browser
 	$(BIN)/python -m pytest tests --durations=15
+
+## The SLURM profile on a one-node SLURM cluster started here (docs/cluster.md; CI runs it after `test`): as root
+## it installs slurm-wlm and munge where missing; elsewhere the test skips
+cluster-test: venv
+	$(BIN)/pip install --quiet -e ".[cluster]"
+	REDSUP_SLURM_TEST=1 $(BIN)/python -m pytest tests/cluster -m slurm -s --durations=5
 
 lint: venv
 	$(BIN)/snakemake --lint

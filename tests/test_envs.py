@@ -213,13 +213,22 @@ def test_jobs_keep_freed_memory_instead_of_faulting_it_in_again():
 
 
 def test_slurm_profile_and_cluster_extra():
+    """The SLURM profile works as written on a cluster without conda or accounting (docs/cluster.md): no software
+    deployment (`--sdm conda` adds it), squeue for job status, no fixed threads or memory (they follow the size
+    profile: config.yaml's `jobs`), only rules that exist; and the guide runs it without profiles/default."""
     assert not (ROOT / "profiles" / "slurm" / "config.yaml").exists()
     profile = yaml.safe_load((ROOT / "profiles" / "slurm" / "profile.yaml").read_text())
-    assert profile["executor"] == "slurm" and profile["software-deployment-method"] == "conda"
+    assert profile["executor"] == "slurm" and "software-deployment-method" not in profile
+    assert profile["slurm-status-command"] == "squeue"
+    assert "set-threads" not in profile and "cores" not in profile
     rules = _rules()
-    for rule in list(profile.get("set-resources", {})) + list(profile.get("set-threads", {})):
+    for rule, res in profile.get("set-resources", {}).items():
         assert rule in rules, f"profiles/slurm/profile.yaml names rule {rule!r}, which does not exist"
+        assert not {"mem_mb", "runtime"} & set(res), f"{rule}: memory and time come from config.yaml's jobs"
+    assert not {"mem_mb", "runtime", "slurm_account"} & set(profile.get("default-resources", {}))
     extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
     assert any(e.startswith("snakemake-executor-plugin-slurm") for e in extras["cluster"])
-    assert "pip install -e \".[cluster]\"" in (ROOT / "README.md").read_text()
+    guide = (ROOT / "docs" / "cluster.md").read_text()
+    assert "pip install -e \".[cluster]\"" in guide
+    assert "snakemake --workflow-profile none --profile profiles/slurm --config profile=paper" in guide
     assert yaml.safe_load((ROOT / "profiles" / "default" / "profile.yaml").read_text())["cores"] == "all"
