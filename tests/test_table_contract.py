@@ -133,9 +133,9 @@ def test_id_part_is_whole_or_a_naming_part():
     assert id_part("table", ids) is None and id_part("summary", ids) is None and id_part("e2", ids) is None
 
 
-def test_scorecard_counts_five_categories(built):
+def test_scorecard_counts_seven_categories(built):
     text = (built / "results/tables/scorecard.md").read_text()
-    assert re.search(r"\*\*Total: \d+ reproduces, \d+ inconclusive, \d+ contradicted, \d+ not testable, "
-                     r"\d+ data description\*\*", text)
+    assert re.search(r"\*\*Total: \d+ reproduces, \d+ inconclusive, \d+ thesis effect ruled out, \d+ contradicted, "
+                     r"\d+ under-trained systems, \d+ not testable, \d+ data description\*\*", text)
     for t in table_ids():
         assert f"| {t} |" in text, t

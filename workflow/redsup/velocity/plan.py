@@ -84,14 +84,16 @@ def parent(config: Mapping, name: str) -> str:
 
 
 def table_frame(table_id: str, config: Mapping, rows: Sequence[tuple], results: Mapping[str, Mapping]):
+    from redsup.tables import noise as noise_lib
     from redsup.tables.contract import TableFrame
     from redsup.velocity import tables as velocity_tables
 
     tc = config["velocity"]["tables"][table_id]
     if "rows" in tc:
         ours, noise = velocity_tables.configuration_table(tc["layout"], rows, results)
-    elif "counts" in tc:
-        ours, noise = velocity_tables.counts_table(results["clip_counts"]), {}
+    elif "counts" in tc:  # the rendered clips' own vehicle counts: exact, not estimates
+        ours = velocity_tables.counts_table(results["clip_counts"])
+        noise = {str(r): {str(c): noise_lib.EXACT for c in ours.columns} for r in ours.index}
     else:
         ours, noise = velocity_tables.figure_table(results[f"figure_{table_id}"]), {}
     return TableFrame(ours, noise, velocity_tables.table_note(config, tc, results))
