@@ -3,6 +3,7 @@ every table it serves, the one-click filter per table, table files on the parent
 metrics. Hand-made records and benchmark files, no workflow run."""
 from __future__ import annotations
 
+import base64
 import json
 import math
 from pathlib import Path
@@ -90,6 +91,45 @@ def test_summary_per_rule_and_stage_sorted_by_total(tmp_path):
     assert png.stat().st_size > 5000
     with pytest.raises(ValueError, match="no benchmark files"):
         job_benchmarks.write_summary(tmp_path / "none", md, png, stages)
+
+
+def _record(metadata: Path, output: str, rule: str, inputs: list[str], logs: list[str]):
+    """A record as Snakemake's file persistence writes it: the output's path in URL-safe base64 is the file name,
+    cut into folders named '@<254 characters>' where longer than a file name may be."""
+    key = base64.urlsafe_b64encode(output.encode()).decode()
+    parts = [key[i:i + 254] for i in range(0, len(key), 254)]
+    path = metadata.joinpath(*["@" + p for p in parts[:-1]], parts[-1])
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps({"rule": rule, "input": inputs, "log": logs, "record_format_version": 6}))
+
+
+def test_dependencies_from_snakemake_records_and_the_critical_path(tmp_path):
+    """Snakemake's records name each job's inputs: a job reads the job that wrote an input (or the directory
+    output it lies in); the critical path and the projections in run_time.md follow the DAG."""
+    root = tmp_path / "results" / "benchmarks"
+    for bench, s in (("world_scene/raw/d/s.tsv", 10.0), ("prepare/prepared/d/s.tsv", 2.0),
+                     ("train/depth/m_lr0.1.tsv", 20.0), ("table/tables/t.tsv", 1.0), ("other/x.tsv", 5.0)):
+        _bench(root / bench, s, 100.0, s)
+    meta = tmp_path / ".snakemake" / "metadata"
+    _record(meta, "results/raw/d/s", "world_scene", [], ["results/logs/raw/d/s.log", "results/runs/raw/d/s.json"])
+    _record(meta, "results/prepared/d/s/cam.npz", "prepare", ["results/raw/d/s"], ["results/logs/prepared/d/s.log"])
+    for out in ("results/depth/m_lr0.1.pt", "results/depth/m_lr0.1.json"):          # one job, two outputs
+        _record(meta, out, "train", ["results/prepared/d/s/cam.npz", "results/raw/d/s/frames/001.png"],
+                ["results/runs/depth/m_lr0.1.json", "results/logs/depth/m_lr0.1.log"])
+    _record(meta, "results/tables/" + "t" * 200 + ".md", "table", ["results/depth/m_lr0.1.json", "config.yaml"],
+            ["results/logs/tables/t.log"])
+    assert any(p.name.startswith("@") for p in meta.iterdir())                # the long name was cut into folders
+    jobs = job_benchmarks.collect(root, {})
+    deps = job_benchmarks.dependencies(jobs, meta, "results/logs")
+    assert deps == {"world_scene raw/d/s": set(), "prepare prepared/d/s": {"world_scene raw/d/s"},
+                    "train depth/m_lr0.1": {"prepare prepared/d/s", "world_scene raw/d/s"},
+                    "table tables/t": {"train depth/m_lr0.1"}, "other x": set()}
+    assert job_benchmarks.dependencies(jobs, tmp_path / "none") is None
+    text = job_benchmarks.markdown(jobs, deps)
+    assert "**Critical path: 33.0 s (0.6 min) over 4 jobs**" in text and "All jobs: 38.0 job-seconds." in text
+    assert "| 2 | 33.0 | 0.6 | 33.0 |" in text                  # x runs beside the chain
+    assert "| 4 | table | tables/t | 1.0 | 33.0 |" in text and "1 of them isolated" in text
+    assert "no critical path" in job_benchmarks.markdown(jobs, None)
 
 
 # ------------------------------------------------------------------------------- tables in MLflow

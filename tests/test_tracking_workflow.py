@@ -3,6 +3,7 @@ found in MLflow by the table's tag filter, exactly."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -52,6 +53,27 @@ def test_run_time_table_and_figure(built):
     totals = [float(line.split("|")[3]) for line in stage_rows]
     assert totals == sorted(totals, reverse=True) and totals[0] > 0
     assert (built / "results" / "figures" / "run_time.png").stat().st_size > 10_000
+
+
+def test_run_time_has_the_critical_path_and_projections(built):
+    """run_time.md's DAG comes from Snakemake's records: the critical path starts at a job that reads no other
+    job's output (a world render), its jobs' times add up to it, and the projected wall time falls with the cores,
+    never below the critical path nor the job-seconds over the cores."""
+    text = (built / "results" / "tables" / "run_time.md").read_text()
+    text = text.split("## Critical path and projected wall time")[1]
+    head = re.search(r"The DAG of the (\d+) jobs above, (\d+) dependencies", text)
+    assert head and int(head[2]) > int(head[1])                     # most jobs read several others
+    path = re.search(r"\*\*Critical path: ([\d.]+) s \([\d.]+ min\) over (\d+) jobs\*\*.* "
+                     r"All jobs: ([\d.]+) job-seconds", text)
+    length, n, total = float(path[1]), int(path[2]), float(path[3])
+    rows = [line.split("|")[1:-1] for line in text.split("| # | rule |")[1].splitlines()[2:] if line.startswith("| ")]
+    assert len(rows) == n >= 4 and rows[0][1].strip() in ("world_scene", "world_clips_shard", "template_field")
+    assert float(rows[-1][4]) == pytest.approx(length, abs=0.1)
+    assert sum(float(r[3]) for r in rows) == pytest.approx(length, abs=0.05 * n)   # each rounded to 0.1 s
+    walls = {int(c): float(w) for c, w in re.findall(r"^\| (\d+) \| ([\d.]+) \|", text, re.M)}
+    assert sorted(walls) == [2, 8, 32, 128]
+    assert walls[2] >= walls[8] >= walls[32] >= walls[128] >= length - 0.05
+    assert walls[2] >= total / 2 - 0.05
 
 
 def test_every_child_has_its_job_time_and_memory(store):

@@ -2,8 +2,6 @@
 glass pass-through, ground truth, determinism, the canonical scene format and the velocity clips."""
 import copy
 import json
-import os
-import shutil
 from pathlib import Path
 
 import cv2
@@ -12,8 +10,8 @@ import pandas as pd
 import pytest
 
 from redsup import config, geometry, sceneio
-from redsup.world import textures
-from redsup.world.clips import write_clips
+from redsup.world import shards, textures
+from redsup.world.clips import merge_shards, render_shard, write_clips
 from redsup.world.common import derive_rng, pose
 from redsup.world.ego import make_ego, speed_profile
 from redsup.world.generate import depth_png, write_scene
@@ -480,52 +478,118 @@ def test_true_distances_end_at_the_annotated_position(cfg, tmp_path):
     assert n >= 2
 
 
-def test_interrupted_clip_split_keeps_its_finished_clips(cfg, tmp_path, monkeypatch):
-    """A split that fails at its third clip leaves no output but keeps clips 1-2; the next attempt renders only
-    clip 3 and writes the same files as an uninterrupted run; other settings discard what was kept."""
-    import redsup.world.clips as clips_mod
+def _files(root: Path) -> list[Path]:
+    """Every file below root but Snakemake's marker in a directory output."""
+    return sorted(p.relative_to(root) for p in root.rglob("*") if p.is_file() and p.name != ".snakemake_timestamp")
 
+
+def _same_files(a: Path, b: Path) -> int:
+    """Asserts that folders a and b hold the same files, byte for byte; returns how many."""
+    files = _files(a)
+    assert _files(b) == files
+    for f in files:
+        assert (a / f).read_bytes() == (b / f).read_bytes(), f
+    return len(files)
+
+
+def _small_clips(cfg, n=3):
     world = copy.deepcopy(cfg["world"])
     clips = copy.deepcopy(cfg["velocity_clips"])
     clips.update(width=96, height=54, frames=3)
-    clips["splits"]["train"] = {"clips": 3, "velocity_scale": 1.0}
-    whole = write_clips(world, clips, "train", 5, tmp_path / "whole" / "train")
+    clips["splits"]["train"] = {"clips": n, "velocity_scale": 1.0}
+    return world, clips
 
-    rendered, fail = [], [True]
+
+def test_clip_shard_names():
+    """Shards are consecutive clips named by their first and last (1-based); the last shard takes the rest."""
+    assert shards.ranges(6, 3) == [range(0, 3), range(3, 6)]
+    assert shards.names(4, 3) == ["001-003", "004-004"] and shards.names(3, 25) == ["001-003"]
+    assert shards.names(0, 3) == []
+    assert [shards.clips_of(n) for n in shards.names(7, 2)] == shards.ranges(7, 2)
+    for bad in ("3-1", "0-2", "x-2", "001"):
+        with pytest.raises(ValueError, match="not <first>-<last>"):
+            shards.clips_of(bad)
+    with pytest.raises(ValueError, match="at least 1"):
+        shards.ranges(5, 0)
+
+
+def test_sharded_split_is_byte_identical_to_one_job(cfg, tmp_path):
+    """A split rendered in shards of 1 and of 2 clips (2: an uneven last shard) and merged holds the same files,
+    byte for byte, as the split rendered in one job, and the same summary: each clip's randomness is the clip's
+    (seed, split, clip), not its shard's."""
+    world, clips = _small_clips(cfg)
+    whole = write_clips(world, clips, "train", 5, tmp_path / "whole")
+    assert not list(tmp_path.glob(".whole*"))               # the one-job shard is gone
+    for size in (1, 2):
+        folders = []
+        for r in shards.ranges(3, size):
+            folders.append(tmp_path / f"size{size}" / shards.name(r))
+            render_shard(world, clips, "train", 5, r, folders[-1])
+        merged = merge_shards(world, dict(clips, shard_size=size), "train", 5, folders, tmp_path / f"split{size}")
+        assert _same_files(tmp_path / "whole", tmp_path / f"split{size}") == 1 + 3 * (3 + 1)
+        assert merged == {k: v for k, v in whole.items() if k not in ("workers", "seconds")} | {"shards": len(folders)}
+        assert sorted(p.name for p in (tmp_path / f"size{size}").iterdir()) == sorted(f.name for f in folders)
+
+
+def test_a_failed_shard_leaves_no_output(cfg, tmp_path, monkeypatch):
+    """A shard that fails at its second clip leaves no folder and no temporary one; what a killed attempt left
+    (its temporary folder) is removed by the next attempt, whose clips are those of an uninterrupted render."""
+    import redsup.world.clips as clips_mod
+
+    world, clips = _small_clips(cfg)
+    write_clips(world, clips, "train", 5, tmp_path / "whole")
     real = clips_mod.render_clip
 
     def flaky(world_cfg, clips_cfg, split, seed, c, folder):
-        if c == 2 and fail:
-            fail.clear()
-            rendered.append("failed")
+        if c == 2:
             (folder / "imgs").mkdir(parents=True)           # cut off mid-clip
             raise RuntimeError("killed")
-        rendered.append(c)
         return real(world_cfg, clips_cfg, split, seed, c, folder)
 
     monkeypatch.setattr(clips_mod, "render_clip", flaky)
-    out = tmp_path / "run" / "train"
+    out = tmp_path / "shards" / "002-003"
     with pytest.raises(RuntimeError, match="killed"):
-        write_clips(world, clips, "train", 5, out)
-    partial = tmp_path / "run" / ".train.partial"
-    assert not out.exists() and sorted(p.name for p in (partial / "clips").iterdir()) == [".3.tmp%d" % os.getpid(),
-                                                                                           "1", "2"]
-    again = write_clips(world, clips, "train", 5, out)
-    assert rendered == [0, 1, "failed", 2] and again["kept_clips"] == 2 and whole["kept_clips"] == 0
-    assert not partial.exists()
-    files = sorted(p.relative_to(tmp_path / "whole" / "train") for p in (tmp_path / "whole" / "train").rglob("*")
-                   if p.is_file())
-    assert sorted(p.relative_to(out) for p in out.rglob("*") if p.is_file()) == files
-    for f in files:
-        assert (out / f).read_bytes() == (tmp_path / "whole" / "train" / f).read_bytes(), f
-    assert {k: again[k] for k in ("annotated", "near", "medium", "far", "mean_relative_speed")} == \
-        {k: whole[k] for k in ("annotated", "near", "medium", "far", "mean_relative_speed")}
+        render_shard(world, clips, "train", 5, range(1, 3), out)
+    assert not any((tmp_path / "shards").iterdir())
+    monkeypatch.setattr(clips_mod, "render_clip", real)
+    (tmp_path / "shards" / ".002-003.tmp999999" / "clips").mkdir(parents=True)   # a SIGKILLed attempt's
+    summary = render_shard(world, clips, "train", 5, range(1, 3), out)
+    assert sorted(p.name for p in (tmp_path / "shards").iterdir()) == ["002-003"]
+    assert sorted(p.name for p in (out / "clips").iterdir()) == ["2", "3"] and summary["clips"] == 2
+    for c in ("2", "3"):
+        _same_files(tmp_path / "whole" / "clips" / c, out / "clips" / c)
 
-    rendered.clear()                                         # kept clips under other settings are not reused
-    shutil.copytree(tmp_path / "whole" / "train", partial)
-    (partial / "key.txt").write_text("another renderer\n")
-    assert write_clips(world, clips, "train", 5, out)["kept_clips"] == 0
-    assert rendered == [0, 1, 2] and not partial.exists()
+
+def test_merge_takes_only_complete_current_shards(cfg, tmp_path):
+    """The merge refuses shards rendered under another key (settings, renderer, numpy / OpenCV) and shards that do
+    not hold every clip once, before it writes anything; clips out of the split are refused before rendering."""
+    world, clips = _small_clips(cfg)
+    first, second = tmp_path / "001-002", tmp_path / "003-003"
+    render_shard(world, clips, "train", 5, range(0, 2), first)
+    render_shard(world, clips, "train", 5, range(2, 3), second)
+    with pytest.raises(ValueError, match="do not hold clips 1 to 3"):
+        merge_shards(world, clips, "train", 5, [first], tmp_path / "train")
+    with pytest.raises(ValueError, match="do not hold clips 1 to 3"):
+        merge_shards(world, clips, "train", 5, [first, second, first], tmp_path / "train")
+    (second / "key.txt").write_text("another renderer\n")
+    with pytest.raises(ValueError, match="forcerun world_clips_shard"):
+        merge_shards(world, clips, "train", 5, [first, second], tmp_path / "train")
+    with pytest.raises(ValueError, match="not consecutive clips"):
+        render_shard(world, clips, "train", 5, range(2, 4), tmp_path / "003-004")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["001-002", "003-003"]
+
+
+@pytest.mark.workflow
+def test_workflow_clip_split_is_the_one_job_render(tiny, tmp_path):
+    """The tiny build renders its test split (4 clips) in two shards (3 + 1, velocity_clips.shard_size 3), merged
+    by world_clips, and removes the shards: the split's files are byte for byte those of one job for the split."""
+    c = config.load(ROOT / "config.yaml", {"profile": "tiny"})
+    assert c["velocity_clips"]["shard_size"] == 3 and c["velocity_clips"]["splits"]["test"]["clips"] == 4
+    bench = tiny / "results" / "benchmarks" / "world_clips_shard" / "raw" / "clip_shards" / "test"
+    assert sorted(p.name for p in bench.iterdir()) == ["001-003.tsv", "004-004.tsv"]
+    assert not (tiny / "results" / "raw" / "clip_shards" / "test").exists()      # temp(): gone after the merge
+    write_clips(c["world"], c["velocity_clips"], "test", c["seed"], tmp_path / "test")
+    assert _same_files(tmp_path / "test", tiny / "results" / "raw" / "clips" / "test") == 1 + 4 * 41
 
 
 def test_clips_render_the_same_files_in_parallel(cfg, tmp_path):

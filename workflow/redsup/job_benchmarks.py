@@ -7,20 +7,30 @@ time; ``write_summary`` writes the markdown table and the figure of ``rule bench
 come from each job's run record (``job.cpu_s``, its own getrusage) where it has them: Snakemake samples a job's
 CPU every second for 30 s and then every 30 s, so its ``cpu_time`` misses up to 30 s of a longer job.
 ``benchmark_path`` / ``job_metrics`` give the file and the MLflow metrics of one job's run record.
+``dependencies`` reads which job read which from Snakemake's own record of every output file
+(``.snakemake/metadata``), so ``markdown`` also gives the DAG's critical path and the wall time projected at a few
+core counts (`redsup.schedule`).
 
 Torch-free and MLflow-free (imported by the tracking import and the summary job).
 """
 from __future__ import annotations
 
+import base64
 import csv
 import json
 import math
+import os
 from collections import Counter
 from collections.abc import Mapping
 from pathlib import Path
 
+from redsup import schedule
+
 BENCHMARK_ROOT = "results/benchmarks"
 RUNS_ROOT = "results/runs"
+LOGS_ROOT = "results/logs"
+SNAKEMAKE_METADATA = ".snakemake/metadata"
+PROJECTED_CORES = (2, 8, 32, 128)
 # benchmark column -> MLflow metric of the job's run
 METRIC_NAMES = {"s": "job_wall_s", "max_rss": "job_max_rss_mb", "cpu_time": "job_cpu_s"}
 
@@ -120,6 +130,68 @@ def collect(root: str | Path, rule_stages: Mapping[str, str], exclude: tuple[str
     return jobs
 
 
+def job_name(job: Mapping) -> str:
+    """A job's name in the DAG: its rule and its benchmark file's path below the rule's folder."""
+    return f"{job['rule']} {job['job']}"
+
+
+def snakemake_records(metadata_root: str | Path) -> dict[str, dict]:
+    """Snakemake's record of every output file it wrote (``.snakemake/metadata``, the file persistence backend: one
+    JSON file per output, named by the output's path in URL-safe base64, split into folders whose names begin with
+    ``@`` where too long): output path -> {rule, input, log, ...}. Unreadable records are left out."""
+    root = Path(metadata_root)
+    out = {}
+    for folder, _, files in os.walk(root):
+        for name in files:
+            parts = Path(folder, name).relative_to(root).parts
+            try:
+                path = base64.urlsafe_b64decode("".join(p.removeprefix("@") for p in parts)).decode()
+                record = json.loads(Path(folder, name).read_text())
+            except (ValueError, OSError):   # a record being written, or a file that is not one
+                continue
+            if isinstance(record, dict) and record.get("rule"):
+                out[path] = record
+    return out
+
+
+def dependencies(jobs: list[dict], metadata_root: str | Path = SNAKEMAKE_METADATA,
+                 logs_root: str | Path = LOGS_ROOT) -> dict[str, set[str]] | None:
+    """Job name (`job_name`) -> the names of the jobs among ``jobs`` whose output files it read, from Snakemake's
+    records (`snakemake_records`: the rule, input files and log files of the job that wrote each output); a job and
+    its benchmark file meet through its log (``<logs_root>/<x>.log`` <-> ``<root>/<rule>/<x>.tsv``). An input in a
+    directory output counts as that output. A job without a record has no known dependencies. None where there
+    are no records (another persistence backend, ``--drop-metadata``)."""
+    records = snakemake_records(metadata_root)
+    if not records:
+        return None
+    logs_root = Path(logs_root)
+    names = {(j["rule"], j["job"]): job_name(j) for j in jobs}
+    producer: dict[str, str] = {}
+    inputs: dict[str, set[str]] = {}
+    for path, record in records.items():
+        for log in record.get("log") or []:
+            try:
+                rel = str(Path(log).relative_to(logs_root))
+            except ValueError:
+                continue
+            name = names.get((record["rule"], rel.removesuffix(".log")))
+            if name is not None:
+                producer[path] = name
+                inputs.setdefault(name, set()).update(record.get("input") or [])
+            break
+
+    def made_by(path: str) -> str | None:
+        for p in (Path(path), *Path(path).parents):
+            if str(p) in producer:
+                return producer[str(p)]
+        return None
+
+    out = {name: set() for name in names.values()}
+    for name, files in inputs.items():
+        out[name] = {d for d in map(made_by, files) if d is not None and d != name}
+    return out
+
+
 def summarise(jobs: list[dict], by: str) -> list[dict]:
     """Totals per ``by`` ("rule" or "stage"), sorted by total wall time (largest first): jobs, total / mean /
     max wall s, total CPU s, peak RSS MB (NaN where no job of the group had a memory reading)."""
@@ -164,8 +236,45 @@ def _machine_note(jobs: list[dict]) -> str:
     return "Machine: " + "; ".join(f"{name} ({n} job{'' if n == 1 else 's'})" for name, n in counts.most_common()) + "."
 
 
-def markdown(jobs: list[dict]) -> str:
-    """The run-time table: per stage, then per rule, both sorted by total wall time."""
+def schedule_lines(jobs: list[dict], deps: Mapping[str, set[str]] | None) -> list[str]:
+    """The critical path of the jobs' DAG and the wall time projected at `PROJECTED_CORES` cores (`redsup.schedule`),
+    from the jobs' measured wall times and their dependencies (`dependencies`; None: unknown)."""
+    lines = ["## Critical path and projected wall time", ""]
+    if deps is None:
+        return lines + ["No dependency records (Snakemake's .snakemake/metadata), so no critical path: a build with "
+                        "the default file persistence writes them.", ""]
+    durations = {job_name(j): j["wall_s"] if math.isfinite(j["wall_s"]) else 0.0 for j in jobs}
+    by_name = {job_name(j): j for j in jobs}
+    path, length = schedule.critical_path(durations, deps)
+    total = sum(durations.values())
+    isolated = sum(1 for j in jobs if not deps.get(job_name(j)) and job_name(j) not in
+                  {d for ds in deps.values() for d in ds})
+    lines += [f"The DAG of the {len(jobs)} jobs above, {sum(map(len, deps.values()))} dependencies between them "
+              "(Snakemake's record of each job's input files, .snakemake/metadata), each job its measured wall time"
+              + (f"; {isolated} of them isolated (reading no other job's output, and none reading theirs)" if isolated
+                 else "") + ".", "",
+              f"**Critical path: {length:.1f} s ({length / 60:.1f} min) over {len(path)} jobs**, the longest chain by "
+              f"measured job time: no number of cores builds faster. All jobs: {total:.1f} job-seconds.", "",
+              "| cores | projected wall s | min | lower bound s |", "|---:|---:|---:|---:|"]
+    for cores in PROJECTED_CORES:
+        wall = schedule.makespan(durations, deps, cores)
+        lines.append(f"| {cores} | {wall:.1f} | {wall / 60:.1f} | {max(length, total / cores):.1f} |")
+    lines += ["", "A projection, not a measurement: greedy list scheduling of the measured job times over the DAG "
+              "(when a core is free, the ready job with the longest remaining path starts on it; one core a job, no "
+              "time between jobs, Snakemake's own time not counted). The lower bound is the larger of the critical "
+              "path and the job-seconds over the cores.", "",
+              "| # | rule | job | wall s | done at s |", "|---:|---|---|---:|---:|"]
+    done = 0.0
+    for k, name in enumerate(path, 1):
+        done += durations[name]
+        lines.append(f"| {k} | {by_name[name]['rule']} | {by_name[name]['job']} | {durations[name]:.1f} | "
+                     f"{done:.1f} |")
+    return lines + [""]
+
+
+def markdown(jobs: list[dict], deps: Mapping[str, set[str]] | None = None) -> str:
+    """The run-time table: per stage, then per rule, both sorted by total wall time; then the critical path and the
+    projected wall times (`schedule_lines`) over the dependencies ``deps`` (None: unknown)."""
     total = sum(j["wall_s"] for j in jobs if math.isfinite(j["wall_s"]))
     lines = ["# Run time and memory per stage and per rule", "",
              f"From {len(jobs)} Snakemake benchmark files (results/benchmarks/<rule>/...): {total:.1f} job-seconds "
@@ -183,7 +292,7 @@ def markdown(jobs: list[dict]) -> str:
             lines.append(f"| {r[by]}{stage} | {r['jobs']} | {_fmt(r['total_s'])} | {share} | {_fmt(r['mean_s'], 2)} | "
                          f"{_fmt(r['max_s'], 2)} | {_fmt(r['cpu_s'])} | {_fmt(r['peak_rss_mb'])} |")
         lines.append("")
-    return "\n".join(lines)
+    return "\n".join(lines + schedule_lines(jobs, deps))
 
 
 def figure(jobs: list[dict], png: str | Path) -> None:
@@ -214,12 +323,14 @@ def figure(jobs: list[dict], png: str | Path) -> None:
 
 
 def write_summary(root: str | Path, md: str | Path, png: str | Path, rule_stages: Mapping[str, str],
-                  exclude: tuple[str, ...] = ()) -> list[dict]:
-    """``markdown`` to ``md`` and ``figure`` to ``png``; returns the per-rule rows."""
+                  exclude: tuple[str, ...] = (), metadata_root: str | Path = SNAKEMAKE_METADATA,
+                  logs_root: str | Path = LOGS_ROOT) -> list[dict]:
+    """``markdown`` (with the `dependencies` of Snakemake's records in ``metadata_root``) to ``md`` and ``figure``
+    to ``png``; returns the per-rule rows."""
     jobs = collect(root, rule_stages, exclude)
     if not jobs:
         raise ValueError(f"{root}: no benchmark files (every rule declares benchmark:; did any job run?)")
     Path(md).parent.mkdir(parents=True, exist_ok=True)
-    Path(md).write_text(markdown(jobs))
+    Path(md).write_text(markdown(jobs, dependencies(jobs, metadata_root, logs_root)))
     figure(jobs, png)
     return summarise(jobs, "rule")

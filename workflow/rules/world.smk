@@ -1,5 +1,6 @@
 # The embedded driving world: scenes in the canonical raw-scene format, and motorway clips in the
 # TuSimple shape. Generation is deterministic given config seed, dataset, split and index.
+import redsup.world.shards as clip_shards
 
 
 rule world_scene:
@@ -23,8 +24,42 @@ rule world_scene:
         "../scripts/world_scene.py"
 
 
+# A split's clips render in shards of velocity_clips.shard_size, one job each (the default train split: 8 jobs of
+# about 3 min instead of one of half an hour); world_clips hard-links them into the split's folder. A clip depends only
+# on (seed, split, clip), so the files are those of one job for the whole split. A killed build keeps its finished
+# shards; a shard is written atomically, so a failed one leaves nothing. CLIP_SHARDS: split -> its shards' names
+# (consecutive clips, redsup.world.shards).
+CLIP_SHARDS = {
+    split: clip_shards.names(config["velocity_clips"]["splits"][split]["clips"], config["velocity_clips"]["shard_size"])
+    for split in WORLD_CLIP_SPLITS
+}
+
+
+rule world_clips_shard:
+    input:
+    output:
+        temp(directory("results/raw/clip_shards/{split}/{shard}")),
+    wildcard_constraints:
+        split=_names_regex(WORLD_CLIP_SPLITS),
+        shard=r"\d+-\d+",
+    log:
+        "results/logs/raw/clip_shards/{split}/{shard}.log",
+        run="results/runs/raw/clip_shards/{split}/{shard}.json",
+    benchmark:
+        "results/benchmarks/world_clips_shard/raw/clip_shards/{split}/{shard}.tsv",
+    threads: COMPUTE_THREADS
+    resources:
+        mem_mb=job_mem_mb(3000),
+        runtime=job_runtime(15),
+    conda:
+        ENVS["data"]
+    script:
+        "../scripts/world_clips_shard.py"
+
+
 rule world_clips:
     input:
+        lambda wc: expand("results/raw/clip_shards/{split}/{shard}", split=wc.split, shard=CLIP_SHARDS[wc.split]),
     output:
         directory("results/raw/clips/{split}"),
     wildcard_constraints:
@@ -34,10 +69,10 @@ rule world_clips:
         run="results/runs/raw/clips/{split}.json",
     benchmark:
         "results/benchmarks/world_clips/raw/clips/{split}.tsv",
-    threads: COMPUTE_THREADS
+    threads: 1
     resources:
-        mem_mb=job_mem_mb(3000),
-        runtime=job_runtime(60),
+        mem_mb=job_mem_mb(1000),
+        runtime=job_runtime(10),
     conda:
         ENVS["data"]
     script:

@@ -1,4 +1,5 @@
-"""`write_clips`: motorway velocity clips in the TuSimple shape (McCraith ch. 3).
+"""Motorway velocity clips in the TuSimple shape (McCraith ch. 3): `render_shard` renders consecutive clips of a
+split, `merge_shards` makes the split's folder from its shards, `write_clips` does both for a whole split.
 
 Each clip: 40 front-camera frames at 20 fps (`clips/<n>/imgs/001.png ...`, or `.jpg` with
 ``image_format: jpg``, as TuSimple's) and `annotation.json`, the
@@ -27,7 +28,7 @@ from redsup.config import config_hash
 
 from .common import SPLIT_CODES, derive_rng, pose, rotate
 from .foveate import render_foveated
-from .generate import publish, write_jpg, write_png
+from .generate import publish, temp_dir_for, write_jpg, write_png
 from .gt import instance_boxes, own_pixels
 from .motorway import build_motorway, motorway_state
 from .sensors import R_VEHICLE_FRONT, Camera, intrinsics
@@ -105,41 +106,16 @@ def annotate(mw, state, cam: Camera, rendered: dict, ccfg: dict, supersample: in
     return out
 
 
-def partial_key(world_cfg: dict, clips_cfg: dict, split: str, seed: int) -> str:
-    """What a split's finished clips depend on: the world and clip settings, the split and seed, the renderer's
-    source (every module of this package) and the numpy / OpenCV versions (JPEG bytes). A kept partial split
-    is reused only under the same key."""
-    settings = config_hash({"world": world_cfg, "velocity_clips": clips_cfg, "split": split, "seed": seed,
+def render_key(world_cfg: dict, clips_cfg: dict, split: str, seed: int) -> str:
+    """What a split's rendered clips depend on: the world and clip settings (but the shard size, which only groups
+    the clips into jobs), the split and seed, the renderer's source (every module of this package) and the numpy /
+    OpenCV versions (JPEG bytes). Every shard records it; a split is merged only from shards of the current key."""
+    clip_settings = {k: v for k, v in clips_cfg.items() if k != "shard_size"}
+    settings = config_hash({"world": world_cfg, "velocity_clips": clip_settings, "split": split, "seed": seed,
                             "numpy": np.__version__, "opencv": cv2.__version__})
     source = hashlib.sha256(b"".join(src.name.encode() + src.read_bytes()
                                      for src in sorted(Path(__file__).parent.glob("*.py"))))
     return f"{settings}-{source.hexdigest()[:12]}"
-
-
-def open_partial(partial: Path, key: str) -> set[int]:
-    """The finished clips (1-based numbers) kept in ``partial`` from an earlier attempt with the same ``key``;
-    anything else there (another key, a clip cut off mid-render) is removed first. Creates ``partial``."""
-    key_file = partial / "key.txt"
-    if partial.exists() and (not key_file.exists() or key_file.read_text().strip() != key):
-        shutil.rmtree(partial)
-    (partial / "clips").mkdir(parents=True, exist_ok=True)
-    key_file.write_text(key + "\n")
-    done = set()
-    for d in (partial / "clips").iterdir():
-        if d.name.isdigit() and (d / "annotation.json").exists():
-            done.add(int(d.name))
-        else:
-            shutil.rmtree(d)                                # an unfinished clip's temporary folder
-    return done
-
-
-def render_clip_into(world_cfg: dict, clips_cfg: dict, split: str, seed: int, c: int, clips_dir: Path) -> list[dict]:
-    """``render_clip`` into ``clips_dir/.<c + 1>.tmp<pid>``, renamed to ``clips_dir/<c + 1>`` once complete: a
-    clip folder under its number is always whole, so an interrupted split keeps every clip it finished."""
-    tmp = clips_dir / f".{c + 1}.tmp{os.getpid()}"
-    ann = render_clip(world_cfg, clips_cfg, split, seed, c, tmp)
-    tmp.rename(clips_dir / str(c + 1))
-    return ann
 
 
 def render_clip(world_cfg: dict, clips_cfg: dict, split: str, seed: int, c: int, folder: Path) -> list[dict]:
@@ -172,16 +148,8 @@ def render_clip(world_cfg: dict, clips_cfg: dict, split: str, seed: int, c: int,
     return ann
 
 
-def write_clips(world_cfg: dict, clips_cfg: dict, split: str, seed: int, out_dir: str | Path,
-                workers: int = 1) -> dict:
-    """Render the clips of `split` (a key of clips_cfg['splits']) into out_dir; returns summary numbers.
-    ``workers`` > 1 renders clips in that many processes; the files are the same as with one.
-
-    Nothing is lost on a crash: the clips are rendered into ``.<out_dir name>.partial`` beside ``out_dir``, each
-    clip moved under its number once whole, and that folder becomes ``out_dir`` when the split is complete. A
-    failed or killed attempt leaves no ``out_dir`` but keeps its finished clips there, and the next attempt with
-    the same settings and renderer (``partial_key``) renders only the missing ones (the train split is about half
-    an hour of one core in the default profile); the summary counts every clip either way."""
+def _check_settings(world_cfg: dict, clips_cfg: dict, split: str) -> int:
+    """The clip count of ``split``; raises on a split, domain or render mode the renderer does not have."""
     if split not in clips_cfg["splits"]:
         raise ValueError(f"unknown clip split {split!r} (have {sorted(clips_cfg['splits'])})")
     if clips_cfg["domain"] not in world_cfg["domains"]:
@@ -189,39 +157,99 @@ def write_clips(world_cfg: dict, clips_cfg: dict, split: str, seed: int, out_dir
                          f"(have {sorted(world_cfg['domains'])})")
     if (clips_cfg.get("foveate") or {"factor": 1})["factor"] > 1 and int(clips_cfg.get("supersample", 1)) > 1:
         raise ValueError("velocity_clips: foveate.factor > 1 and supersample > 1 do not combine")
+    return int(clips_cfg["splits"][split]["clips"])
+
+
+def render_shard(world_cfg: dict, clips_cfg: dict, split: str, seed: int, clips: range, out_dir: str | Path,
+                 workers: int = 1) -> dict:
+    """Render clips ``clips`` (0-based) of ``split`` into ``out_dir``: ``clips/<c + 1>/`` each and ``key.txt``
+    (`render_key`); returns summary numbers. ``workers`` > 1 renders clips in that many processes; the files are
+    the same as with one, and the same as in any other shard of the split (a clip depends on (seed, split, c)).
+
+    The shard is written into a temporary sibling, renamed to ``out_dir`` once every clip is whole: a failed or
+    killed shard leaves no ``out_dir``, and its next attempt first removes what a killed one left."""
+    n = _check_settings(world_cfg, clips_cfg, split)
+    if not clips or clips.step != 1 or clips.start < 0 or clips.stop > n:
+        raise ValueError(f"clips {clips} are not consecutive clips of split {split!r} (0 to {n - 1})")
     start = time.time()
-    spec = clips_cfg["splits"][split]
-    cam = clip_camera(world_cfg, clips_cfg)
     out_dir = Path(out_dir)
-    partial = out_dir.parent / f".{out_dir.name}.partial"
-    kept = open_partial(partial, partial_key(world_cfg, clips_cfg, split, seed))
+    for stale in out_dir.parent.glob(f".{out_dir.name}.tmp*"):     # a killed attempt's temporary folder
+        shutil.rmtree(stale)
+    tmp = temp_dir_for(out_dir)
+    try:
+        parallel = workers > 1 and len(clips) > 1
+        with (ProcessPoolExecutor(max_workers=min(workers, len(clips)), mp_context=get_context("fork")) if parallel
+              else nullcontext()) as pool:
+            rendered = (pool.map if parallel else map)(render_clip, repeat(world_cfg), repeat(clips_cfg),
+                                                       repeat(split), repeat(seed), clips,
+                                                       [tmp / "clips" / str(c + 1) for c in clips])
+            anns = list(tqdm(rendered, total=len(clips), desc=f"clips {split} {clips.start + 1}-{clips.stop}",
+                             unit="clip", mininterval=5))
+        (tmp / "key.txt").write_text(render_key(world_cfg, clips_cfg, split, seed) + "\n")
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    publish(tmp, out_dir)
+    return {"clips": len(clips), "first_clip": clips.start + 1, "annotated": sum(map(len, anns)),
+            "workers": int(workers), "seconds": time.time() - start}
+
+
+def merge_shards(world_cfg: dict, clips_cfg: dict, split: str, seed: int, shards: list[str | Path],
+                 out_dir: str | Path) -> dict:
+    """The split's folder ``out_dir`` from its rendered shards: ``calibration.txt`` and every clip, hard-linked from
+    the shards (nothing is copied), through a temporary sibling renamed at the end; returns the split's summary
+    numbers. The shards must hold clips 1 to n exactly once, all rendered under the current `render_key`."""
+    n = _check_settings(world_cfg, clips_cfg, split)
+    key = render_key(world_cfg, clips_cfg, split, seed)
+    shards = [Path(s) for s in shards]
+    stale = [str(s) for s in shards if (s / "key.txt").read_text().strip() != key]
+    if stale:
+        raise ValueError(f"clip shards rendered with other settings, renderer or numpy / OpenCV: {stale}; render "
+                         "them again (snakemake --forcerun world_clips_shard)")
+    folders = sorted((d for s in shards for d in (s / "clips").iterdir()), key=lambda d: int(d.name))
+    if [int(d.name) for d in folders] != list(range(1, n + 1)):
+        raise ValueError(f"clip shards {[str(s) for s in shards]} do not hold clips 1 to {n} of split {split!r} "
+                         "once each")
+    K = clip_camera(world_cfg, clips_cfg).K
     counts = {"near": 0, "medium": 0, "far": 0}
     speeds, n_ann = [], 0
-    n = spec["clips"]
-    todo = [c for c in range(n) if c + 1 not in kept]
-    if kept:
-        print(f"clips {split}: {n - len(todo)} of {n} clips kept from an interrupted attempt in {partial}")
-    K = cam.K
-    (partial / "calibration.txt").write_text(f"{K[0, 0]:.6f} {K[1, 1]:.6f} {K[0, 2]:.6f} {K[1, 2]:.6f}\n"
-                                             f"{clips_cfg['camera_height']:.4f}\n")
-    parallel = workers > 1 and len(todo) > 1
     lo, hi = clips_cfg["distance_bins"]
-    with (ProcessPoolExecutor(max_workers=min(workers, len(todo)), mp_context=get_context("fork")) if parallel
-          else nullcontext()) as pool:
-        rendered = (pool.map if parallel else map)(render_clip_into, repeat(world_cfg), repeat(clips_cfg),
-                                                   repeat(split), repeat(seed), todo, repeat(partial / "clips"))
-        anns = (next(rendered) if c + 1 not in kept else
-                json.loads((partial / "clips" / str(c + 1) / "annotation.json").read_text()) for c in range(n))
-        for ann in tqdm(anns, total=n, desc=f"clips {split}", unit="clip", mininterval=5):
-            for a in ann:
+    out_dir = Path(out_dir)
+    tmp = temp_dir_for(out_dir)
+    try:
+        (tmp / "calibration.txt").write_text(f"{K[0, 0]:.6f} {K[1, 1]:.6f} {K[0, 2]:.6f} {K[1, 2]:.6f}\n"
+                                             f"{clips_cfg['camera_height']:.4f}\n")
+        (tmp / "clips").mkdir()
+        for folder in folders:
+            shutil.copytree(folder, tmp / "clips" / folder.name, copy_function=os.link)
+            for a in json.loads((folder / "annotation.json").read_text()):
                 z = a["position"][0]
                 counts["near" if z < lo else "medium" if z < hi else "far"] += 1
                 speeds.append(np.hypot(*a["velocity"]))
-            n_ann += len(ann)
-    (partial / "key.txt").unlink()
-    publish(partial, out_dir)
+                n_ann += 1
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    publish(tmp, out_dir)
     return {"clips": n, "annotated": n_ann, "annotated_per_clip": n_ann / max(n, 1),
             "near": counts["near"], "medium": counts["medium"], "far": counts["far"],
             "mean_relative_speed": float(np.mean(speeds)) if speeds else 0.0,
-            "velocity_scale": float(spec["velocity_scale"]), "workers": int(workers),
-            "kept_clips": n - len(todo), "seconds": time.time() - start}
+            "velocity_scale": float(clips_cfg["splits"][split]["velocity_scale"]), "shards": len(shards)}
+
+
+def write_clips(world_cfg: dict, clips_cfg: dict, split: str, seed: int, out_dir: str | Path,
+                workers: int = 1) -> dict:
+    """Render the clips of ``split`` (a key of clips_cfg['splits']) into ``out_dir`` in one call, as one shard of
+    every clip (``.<out_dir name>.shard`` beside it) merged into ``out_dir``; returns summary numbers. For studies,
+    benchmarks and tests: the workflow renders a split in shards of ``velocity_clips.shard_size`` (one job each)
+    and merges them, and the files are the same."""
+    start = time.time()
+    n = _check_settings(world_cfg, clips_cfg, split)
+    out_dir = Path(out_dir)
+    shards = [out_dir.parent / f".{out_dir.name}.shard"] if n else []
+    for shard in shards:
+        render_shard(world_cfg, clips_cfg, split, seed, range(n), shard, workers)
+    summary = merge_shards(world_cfg, clips_cfg, split, seed, shards, out_dir)
+    for shard in shards:
+        shutil.rmtree(shard)
+    return {**summary, "workers": int(workers), "seconds": time.time() - start}
