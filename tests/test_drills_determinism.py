@@ -9,6 +9,7 @@ import pytest
 import torch
 
 from redsup import determinism
+from redsup import threads as job_threads
 from redsup.depth import data, networks, training
 from redsup.velocity import mlp
 
@@ -26,7 +27,7 @@ def threads(monkeypatch):
     """One thread, as every tiny-profile training job (two would also be deterministic, but spin badly on a
     loaded 2-core machine)."""
     before = torch.get_num_threads(), torch.are_deterministic_algorithms_enabled()
-    for name in determinism.THREAD_VARIABLES:      # configure sets them for child processes: undone afterwards
+    for name in job_threads.THREAD_VARIABLES:      # configure sets them for child processes: undone afterwards
         monkeypatch.setenv(name, os.environ.get(name, ""))
     determinism.configure(1)
     yield 1
@@ -70,13 +71,13 @@ def test_velocity_mlp_training_twice_gives_identical_bits(threads):
 
 def test_configure_sets_the_thread_count_and_deterministic_algorithms(monkeypatch):
     before = torch.get_num_threads(), torch.are_deterministic_algorithms_enabled()
-    for name in determinism.THREAD_VARIABLES:
+    for name in job_threads.THREAD_VARIABLES:
         monkeypatch.setenv(name, "2")
     try:
         torch.use_deterministic_algorithms(False)
         determinism.configure(1)
         assert torch.get_num_threads() == 1
-        assert {os.environ[name] for name in determinism.THREAD_VARIABLES} == {"1"}
+        assert {os.environ[name] for name in job_threads.THREAD_VARIABLES} == {"1"}
         assert torch.are_deterministic_algorithms_enabled()
         with pytest.raises(ValueError, match="threads must be a positive integer"):
             determinism.configure(0)

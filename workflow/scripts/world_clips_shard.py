@@ -4,7 +4,7 @@ import sys
 sys.stderr = sys.stdout = open(snakemake.log[0], "w", buffering=1)  # noqa: F821
 
 # the clips' processes are the parallelism: one BLAS thread each, whatever the job's threads (before numpy loads)
-from redsup.determinism import pin_threads  # noqa: E402
+from redsup.threads import pin_threads  # noqa: E402
 pin_threads(1)
 
 from redsup.runlog import child_run  # noqa: E402
