@@ -78,7 +78,7 @@ def test_outliers_on_the_real_kitti_object_sample(tmp_path, realdata):
 def test_outliers_on_a_tiny_rendered_world(tmp_path):
     """Rendered cars: the mask removes most of the box's outliers (background and ground), the box keeps a
     near-range fraction like the real sample's, mostly in its upper part; glass and edges keep a few in the
-    mask. (6 train scenes x 4 frames, benchmarks/bench_inmask_outliers.py: see the README's world section.)"""
+    mask. (6 train scenes x 4 frames, studies/inmask_outliers.py: see docs/world.md.)"""
     cfg = config.load(ROOT / "config.yaml", {"profile": "tiny"})
     world = copy.deepcopy(cfg["world"])
     world["frames"] = {"train": 2, "test": 2, "long": 2}
