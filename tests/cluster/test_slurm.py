@@ -45,13 +45,19 @@ GPU_RULES = {"train_depth", "predict_depth", "lidar_detector_train", "lifting_ru
 PROBE_RULE, PROBE_THREADS = "world_clips", (os.cpu_count() or 2) + 2
 
 
+def _tiny_line(doc: Path) -> str:
+    lines = [ln.split("#")[0].strip() for ln in doc.read_text().splitlines() if ln.startswith("snakemake ")]
+    tiny = [ln for ln in lines if "--config profile=tiny" in ln and "profiles/slurm" in ln]
+    assert tiny, f"{doc.name} has no `snakemake ... --profile profiles/slurm ... --config profile=tiny` line"
+    return tiny[0]
+
+
 def docs_command() -> list[str]:
-    """The tiny-profile snakemake line of docs/cluster.md, split like a shell would."""
-    text = (ROOT / "docs" / "cluster.md").read_text()
-    lines = [ln.split("#")[0].strip() for ln in text.splitlines() if ln.startswith("snakemake ")]
-    tiny = [ln for ln in lines if "--config profile=tiny" in ln]
-    assert tiny, "docs/cluster.md has no `snakemake ... --config profile=tiny` line"
-    words = shlex.split(tiny[0])
+    """The tiny-profile snakemake line of the README's cluster section, split like a shell would (docs/cluster.md
+    gives the same line)."""
+    line = _tiny_line(ROOT / "README.md")
+    assert _tiny_line(ROOT / "docs" / "cluster.md") == line, "README.md and docs/cluster.md give other commands"
+    words = shlex.split(line)
     assert "--profile" in words and "profiles/slurm" in words, words
     return words
 
