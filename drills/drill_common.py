@@ -23,6 +23,8 @@ import sys
 import time
 from pathlib import Path
 
+from redsup.tables.compare import differing_cells, timing_only
+
 ROOT = Path(__file__).resolve().parents[1]
 LOCK_MESSAGE = "cannot be locked"   # Snakemake's LockException text
 
@@ -156,18 +158,6 @@ def digests(folder: Path, pattern: str = "*.csv") -> dict[str, str]:
             for p in sorted(folder.rglob(pattern)) if p.is_file()}
 
 
-TIMING_COLUMN = re.compile(r"runtime|second|\(ms\)|\(s\)|time|fps|per s\b", re.IGNORECASE)
-
-
-def differing_cells(a: Path, b: Path) -> list[tuple[int, str]] | None:
-    """(row, column header) of every cell that differs between two CSVs; None when their shapes differ."""
-    with open(a, newline="") as fa, open(b, newline="") as fb:
-        ra, rb = list(csv.reader(fa)), list(csv.reader(fb))
-    if len(ra) != len(rb) or not ra or any(len(x) != len(y) for x, y in zip(ra, rb)) or ra[0] != rb[0]:
-        return None
-    return [(i, ra[0][j]) for i in range(1, len(ra)) for j in range(len(ra[i])) if ra[i][j] != rb[i][j]]
-
-
 def compare_tables(reference: Path, other: Path) -> dict:
     """Byte comparison of every CSV under results/tables/ (and, for information, every other file there).
 
@@ -177,7 +167,7 @@ def compare_tables(reference: Path, other: Path) -> dict:
     differ, timing_only = [], {}
     for k in sorted(k for k in set(a) & set(b) if a[k] != b[k]):
         cells = differing_cells(reference / "results" / "tables" / k, other / "results" / "tables" / k)
-        if cells is not None and cells and all(TIMING_COLUMN.search(col) for _, col in cells):
+        if timing_only(cells):
             timing_only[k] = sorted({col for _, col in cells})
         else:
             differ.append(k)

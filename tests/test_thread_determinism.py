@@ -17,10 +17,9 @@ import pytest
 import yaml
 
 from redsup import jobs
+from redsup.tables.compare import TIMING_COLUMN, differing_cells
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path.insert(0, str(ROOT / "drills"))
-import drill_common  # noqa: E402  (the drills' table comparison: which columns are measured times)
 
 TARGETS = [f"results/tables/{t}.csv" for t in ("mccraith_ch3_table2", "mccraith_ch4_table7", "mccraith_ch6_table4",
                                                "mccraith_ch7_table1")]
@@ -51,9 +50,9 @@ def test_tables_do_not_follow_the_executors_threads(tiny, tmp_path):
             assert f"rule {rule}:" in log, rule
     assert "    threads: 2\n" not in logs[0] and logs[1].count("    threads: 2\n") >= len(NETWORK_RULES)
     for target in TARGETS:
-        cells = drill_common.differing_cells(one / target, two / target)
+        cells = differing_cells(one / target, two / target)
         assert cells is not None, f"{target}: the two reruns' tables differ in shape"
-        assert all(drill_common.TIMING_COLUMN.search(col) for _, col in cells), \
+        assert all(TIMING_COLUMN.search(col) for _, col in cells), \
             f"{target}: {sorted({col for _, col in cells})} differ between --cores 1 and two threads per job"
 
 

@@ -26,10 +26,10 @@ from pathlib import Path
 
 import pytest
 
+from redsup.tables.compare import TIMING_COLUMN, differing_cells
+
 ROOT = Path(__file__).resolve().parents[2]
 HERE = Path(__file__).resolve().parent
-sys.path.insert(0, str(ROOT / "drills"))
-import drill_common  # noqa: E402  (the drills' table comparison: which columns are measured times)
 
 pytestmark = [pytest.mark.slurm,
               pytest.mark.skipif(os.environ.get("REDSUP_SLURM_TEST") != "1",
@@ -198,8 +198,8 @@ def test_the_tables_equal_a_local_build(builds):
     for target in TARGETS:
         ours, local = builds["repo"] / target, builds["reference"] / target
         assert ours.is_file() and local.is_file(), target
-        cells = drill_common.differing_cells(local, ours)
-        if cells is None or not all(drill_common.TIMING_COLUMN.search(col) for _, col in cells):
+        cells = differing_cells(local, ours)
+        if cells is None or not all(TIMING_COLUMN.search(col) for _, col in cells):
             differ[target] = "shape" if cells is None else sorted({col for _, col in cells})
     assert not differ, f"SLURM tables differ from the local build's: {json.dumps(differ)}"
     print(f"{len(TARGETS)} tables equal the local build's")

@@ -373,24 +373,25 @@ def run_case(family: str, mode: str, threads: int, device: torch.device, fn) -> 
 
 
 def cases(cfg: dict, args, device: torch.device, tmp: Path) -> list:
-    """(family, mode, threads of its rule, function) of every check."""
+    """(family, mode, threads of its job, function) of every check."""
     def threads(n) -> int:
         return args.threads or max(1, min(int(n), os.cpu_count() or 1))
 
     out, first = [], {}
+    n = threads(cfg["jobs"]["compute_threads"])    # every family's job: the configuration's compute threads
     for m in cfg["depth"]["models"]:
         first.setdefault(m["mode"], m["dataset"])      # each trained mode once, at its first dataset's size
     if "depth" in args.families:
-        out += [("depth", f"{ds}/{mode}", threads(1), functools.partial(depth_case, cfg, ds, mode, args, device))
+        out += [("depth", f"{ds}/{mode}", n, functools.partial(depth_case, cfg, ds, mode, args, device))
                 for mode, ds in first.items()]
     if "detector" in args.families:
-        out += [("detector", conf, threads(cfg["lidar_detector"]["threads"]),
+        out += [("detector", conf, n,
                  functools.partial(detector_case, cfg, conf, args, device, tmp)) for conf in DETECTOR_RUNS]
     if "lifting" in args.families:
-        out.append(("lifting", cfg["lifting"]["full_method"], threads(cfg["lifting"]["threads"]),
+        out.append(("lifting", cfg["lifting"]["full_method"], n,
                     functools.partial(lifting_case, cfg, args, device)))
     if "velocity" in args.families:
-        out.append(("velocity", "mlp_synthetic", threads(1), functools.partial(velocity_case, cfg, args, device)))
+        out.append(("velocity", "mlp_synthetic", n, functools.partial(velocity_case, cfg, args, device)))
     return out
 
 
