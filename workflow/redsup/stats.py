@@ -9,6 +9,7 @@ on the same units gets the same resamples, and their replicate differences pair 
 """
 from __future__ import annotations
 
+import functools
 import hashlib
 from collections.abc import Sequence
 
@@ -43,15 +44,24 @@ def n_clusters(unit_ids: Sequence) -> int:
     return len({cluster_of(u) for u in unit_ids})
 
 
-def cluster_draws(unit_ids: Sequence, n: int) -> tuple[np.ndarray, list[str], list[np.ndarray]]:
+def cluster_draws(unit_ids: Sequence, n: int) -> tuple[np.ndarray, tuple[str, ...], tuple[np.ndarray, ...]]:
     """(n x G cluster indices drawn with replacement, sorted unit ids, the clusters' unit indices). Seeded by the
-    units' digest. Where every unit is its own cluster this is the classic bootstrap's n x N unit draw."""
-    ids, members = clusters(unit_ids)
-    rng = np.random.default_rng(int(units_digest(ids), 16) % (2 ** 32))
-    return rng.integers(0, len(members), size=(n, len(members))), ids, members
+    units' digest. Where every unit is its own cluster this is the classic bootstrap's n x N unit draw. Read-only
+    arrays, computed once per set of units: every cell of a table's rows resamples the same units."""
+    return _cluster_draws(tuple(sorted(str(u) for u in unit_ids)), n)
 
 
-def resample_sets(unit_ids: Sequence, n: int) -> tuple[list[np.ndarray], list[str]]:
+@functools.lru_cache(maxsize=64)
+def _cluster_draws(ids: tuple[str, ...], n: int) -> tuple[np.ndarray, tuple[str, ...], tuple[np.ndarray, ...]]:
+    ids_list, members = clusters(ids)
+    rng = np.random.default_rng(int(units_digest(ids_list), 16) % (2 ** 32))
+    draws = rng.integers(0, len(members), size=(n, len(members)))
+    for a in (draws, *members):
+        a.flags.writeable = False
+    return draws, tuple(ids_list), tuple(members)
+
+
+def resample_sets(unit_ids: Sequence, n: int) -> tuple[list[np.ndarray], tuple[str, ...]]:
     """(n index arrays into the sorted unit ids, one a cluster-bootstrap resample; the sorted ids)."""
     draws, ids, members = cluster_draws(unit_ids, n)
     return [np.concatenate([members[g] for g in row]) for row in draws], ids

@@ -21,6 +21,7 @@ They never write the parameters of ``models``.
 from __future__ import annotations
 
 import time
+from contextlib import contextmanager
 from collections.abc import Callable, Iterable, Mapping, Sequence
 
 import torch
@@ -133,6 +134,23 @@ def _finite(tensors: Iterable[torch.Tensor | None]) -> bool:
     return all(t is None or bool(torch.isfinite(t).all()) for t in tensors)
 
 
+@contextmanager
+def _restored(modules: Sequence[nn.Module]):
+    """Restore every parameter's ``requires_grad`` and every submodule's train / eval mode on exit, and leave
+    ``.grad`` None: what ``adapt`` and ``adapt_batched`` change only while they run."""
+    params = [p for m in modules for p in m.parameters()]
+    flags = [p.requires_grad for p in params]
+    modes = [(sub, sub.training) for m in modules for sub in m.modules()]
+    try:
+        yield
+    finally:
+        for p, flag in zip(params, flags):
+            p.requires_grad_(flag)
+            p.grad = None
+        for sub, training in modes:
+            sub.training = training
+
+
 def adapt(models: Models, loss_fn: LossFn, batch, params: Sequence[nn.Parameter], lr: float, steps: int,
           callback: Callback | None = None) -> list[float]:
     """``steps`` vanilla-SGD updates of ``params`` on ``loss_fn(models, batch)["loss"]``; returns the losses.
@@ -150,11 +168,9 @@ def adapt(models: Models, loss_fn: LossFn, batch, params: Sequence[nn.Parameter]
     backward can crash on them).
     """
     all_params = [p for m in models.values() for p in m.parameters()]
-    flags = [p.requires_grad for p in all_params]
-    modes = [(m, m.training) for model in models.values() for m in model.modules()]
     selected = {id(p) for p in params}
     history: list[float] = []
-    try:
+    with _restored(list(models.values())):
         for model in models.values():
             model.eval()
         for p in all_params:
@@ -180,12 +196,6 @@ def adapt(models: Models, loss_fn: LossFn, batch, params: Sequence[nn.Parameter]
             elapsed += time.perf_counter() - start
             if callback is not None:
                 callback(step, history[-1], elapsed)
-    finally:
-        for p, flag in zip(all_params, flags):
-            p.requires_grad_(flag)
-            p.grad = None
-        for m, training in modes:
-            m.training = training
     return history
 
 
@@ -392,9 +402,6 @@ def adapt_batched(models: Models, loss_fn: LossFn, samples: Sequence, params: Se
     histories: list[list[float]] = [[] for _ in range(n)]
     if n == 0:
         return histories, copies
-    all_params = list(call.parameters())
-    flags = [p.requires_grad for p in all_params]
-    modes = [(m, m.training) for m in call.modules()]
     diverged = [False] * n
     noise = _SampleNoise([]) if generators is not None else None
 
@@ -416,10 +423,9 @@ def adapt_batched(models: Models, loss_fn: LossFn, samples: Sequence, params: Se
             leaves, _select(stacked, idx), torch.arange(len(active)))
         return out, leaves
 
-    try:
-        for m, _ in modes:
-            m.eval()
-        for p in all_params:
+    with _restored([call]):
+        call.eval()
+        for p in call.parameters():
             p.requires_grad_(False)
             p.grad = None
         if callback is not None:
@@ -472,12 +478,6 @@ def adapt_batched(models: Models, loss_fn: LossFn, samples: Sequence, params: Se
             elapsed += time.perf_counter() - start
             if callback is not None:
                 callback(step, [h[-1] for h in histories], elapsed, copies)
-    finally:
-        for p, flag in zip(all_params, flags):
-            p.requires_grad_(flag)
-            p.grad = None
-        for m, training in modes:
-            m.training = training
     return histories, copies
 
 

@@ -60,8 +60,8 @@ def table_frame(rows: Seq[Row], results: Seq[Mapping], time_column: str | None =
             noise[row.label] = {col: noise_lib.bootstrap({f"{r['sequence']}/{r['frame']}": r["metrics"][key]
                                                           for r in kept})
                                 for key, col in METRIC_COLUMNS.items()}
-        secs = [r["seconds"] for r in kept if r.get("seconds") is not None]
         timed = {f"{r['sequence']}/{r['frame']}": float(r["seconds"]) for r in kept if r.get("seconds") is not None}
+        secs = list(timed.values())  # the kept frames are distinct: one timing each
         if time_column:
             line[time_column] = float(np.mean(secs)) if secs else np.nan
             if timed:  # every frame is one timing: the column's spread over the frames (and their scenes)

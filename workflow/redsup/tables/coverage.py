@@ -40,10 +40,12 @@ class Shape:
 
 
 # the shapes of the real tables: ch. 4 / 5 depth (3 seeds, 10 test scenes of 10 frames), a grid over few uneven
-# scenes (the fewest clusters a verdict is given on), velocity-like clips of a few vehicles each
+# scenes (the fewest clusters a verdict is given on; and a harder case, one scene 6x another), velocity-like clips
+# of a few vehicles each
 SHAPES = {
     "depth": Shape(3, (10,) * 10),
     "few uneven scenes": Shape(3, (5, 15, 8, 12, 10)),
+    "few very uneven scenes": Shape(3, (4, 25, 9, 16, 6)),
     "clips": Shape(3, (3, 2, 4, 1, 3, 2, 5, 2, 3, 2, 4, 3, 2, 1, 3, 2, 4, 2, 3, 2)),
 }
 
