@@ -44,6 +44,20 @@ def _path(error) -> str:   # a jsonschema.ValidationError
     return ".".join(str(p) for p in error.absolute_path) or "<top level>"
 
 
+def _message(error) -> str:   # a jsonschema.ValidationError
+    """The error's message; for a value that fits none of a oneOf / anyOf's shapes (e.g. a table section of a
+    stage with several table shapes), the errors of the shape it comes closest to: the one whose required keys
+    it has, with the fewest errors, so a misspelled key inside it is still named."""
+    if error.validator not in ("oneOf", "anyOf") or not error.context:
+        return error.message
+    branches: dict = {}
+    for sub in error.context:
+        branches.setdefault(sub.relative_schema_path[0], []).append(sub)
+    closest = min(branches.values(), key=lambda errs: (
+        any(e.validator == "required" and not e.relative_path for e in errs), len(errs)))
+    return "fits none of its shapes; closest: " + "; ".join(f"{_path(e)}: {e.message}" for e in closest)
+
+
 def validate(cfg: dict, schema: dict, where: str = "config.yaml") -> None:
     """Raise ConfigError listing every schema violation with its key path."""
     import jsonschema   # here: every job imports this module (config_hash) and never validates
@@ -51,7 +65,7 @@ def validate(cfg: dict, schema: dict, where: str = "config.yaml") -> None:
     validator = jsonschema.Draft202012Validator(schema)
     errors = sorted(validator.iter_errors(cfg), key=lambda e: list(e.absolute_path))
     if errors:
-        lines = [f"  - {_path(e)}: {e.message}" for e in errors]
+        lines = [f"  - {_path(e)}: {_message(e)}" for e in errors]
         raise ConfigError(f"{where}: invalid configuration:\n" + "\n".join(lines))
 
 

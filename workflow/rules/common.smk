@@ -7,6 +7,8 @@ import redsup.jobs
 import redsup.tables.contract as table_contract
 
 _resolved = redsup.config.resolve(config)
+# the schemas check each table section's shape; its key must be a tables.yaml id of the section's stages
+table_contract.check_config_tables(_resolved)
 config.clear()
 config.update(_resolved)
 

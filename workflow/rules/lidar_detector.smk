@@ -3,7 +3,7 @@
 # lidar_detector_split  results/lidar_detector/data/{train,test}.npz   the cached frames of a split
 # lidar_detector_train  results/lidar_detector/{metrics,models,detections}/{conf}/seed{seed}.*   one configuration
 #                       trained with one seed index (a child run) and evaluated on the test split
-# The tables mccraith_ch7_table{1..3} are built by rule table (tables.smk) from redsup.lidar_detector.plan:
+# The ch. 7 tables (tables.yaml, stage detector) are built by rule table (tables.smk) from redsup.lidar_detector.plan:
 # configurations (`lidar_detector.runs`), seeds and rows (`lidar_detector.tables.<id>`) are data; Table 1's
 # ch. 6 row is read from the lifting stage's runs of `lifting.full_method`.
 import redsup.lidar_detector.plan as ld_plan

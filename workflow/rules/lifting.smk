@@ -6,7 +6,7 @@
 # lifting_labels  results/lifting/labels/{conf}/seed{seed}.npz   a run's boxes on the training detections (Table IV (iii))
 # template_field  results/det3d/template/{stage}.npz   the template car's distance field of a stage (lifting, and
 #                 lidar_detector for ch. 7), built once instead of in every training job
-# The tables mccraith_ch6_table{1..4} are built by rule table (tables.smk) from redsup.lifting.plan: the
+# The ch. 6 tables (tables.yaml, stage lifting) are built by rule table (tables.smk) from redsup.lifting.plan: the
 # configurations (`lifting.runs`), seeds (`lifting.seeds`) and rows (`lifting.tables.<id>.rows`) are data.
 import redsup.lifting.plan as lift_plan
 

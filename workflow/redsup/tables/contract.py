@@ -11,15 +11,20 @@
     our table from the rows and ``results`` (run -> parsed JSON). Tables differ only by their config section
     ``<stage>.tables.<table_id>`` (and their rows), never by branching on the id.
 
-The stage of a table id comes from ``tables.yaml`` (``stage:``), its plan module from ``stage_modules:``.
+The stage of a table id comes from ``tables.yaml`` (``stage:``), its plan module from ``stage_modules:``, the
+config section that configures it from ``stage_config:``. The ids are written in tables.yaml and, as the keys of
+their sections, in config.yaml, nowhere else: the schemas check a section's shape, ``check_config_tables`` its
+keys.
 """
 from __future__ import annotations
 
+import difflib
 import importlib
 from dataclasses import dataclass, field
 from types import ModuleType
 from typing import TYPE_CHECKING
 
+from redsup.config import ConfigError
 from redsup.tables.registry import load_registry, table_info
 
 if TYPE_CHECKING:
@@ -85,3 +90,52 @@ def all_rows(config, scenes_of, registry: dict | None = None) -> dict[str, list[
         for table, rows in importlib.import_module(module).rows(config, scenes_of).items():
             out[table] = [tuple(r) for r in rows]
     return out
+
+
+def config_sections(registry: dict | None = None) -> dict[str, list[str]]:
+    """config.yaml section -> the stages whose tables its ``tables:`` configures (tables.yaml ``stage_config:``)."""
+    reg = registry or load_registry()
+    mapping = reg.get("stage_config") or {}
+    missing = [s for s in reg["stages"] if s not in mapping]
+    if missing:
+        raise KeyError(f"tables.yaml: stages {missing} have no entry in stage_config")
+    out: dict[str, list[str]] = {}
+    for stage, section in mapping.items():
+        out.setdefault(section, []).append(stage)
+    return out
+
+
+def _nearest(key: str, here: list[str], everywhere: list[str] = ()) -> str:
+    """The ids nearest ``key`` (difflib): of its section first, else of any section; else the section's ids."""
+    close = (difflib.get_close_matches(key, here, n=3, cutoff=0.6)
+             or difflib.get_close_matches(key, list(everywhere), n=3, cutoff=0.6))
+    return f"nearest: {', '.join(close)}" if close else f"ids here: {', '.join(here) or 'none'}"
+
+
+def check_config_tables(config, registry: dict | None = None, where: str = "config.yaml") -> None:
+    """Every key of a section's ``tables:`` is a tables.yaml id of a stage that section configures
+    (``stage_config:``), and every such id has its key: rule all builds every id's table, and a table without
+    its section would fail only in its own table job. Raises ConfigError naming each wrong or missing key with
+    the nearest ids (difflib)."""
+    reg = registry or load_registry()
+    stage_of = {t: e["stage"] for t, e in reg["tables"].items()}
+    problems = []
+    for section, stages in config_sections(reg).items():
+        tables = (config.get(section) or {}).get("tables") or {}
+        here = [t for t, s in stage_of.items() if s in stages]
+        for key in tables:
+            if key not in stage_of:
+                problems.append(f"{section}.tables.{key} is not a table id of tables.yaml "
+                                f"({_nearest(key, here, stage_of)})")
+            elif stage_of[key] not in stages:
+                other = reg["stage_config"][stage_of[key]]
+                problems.append(f"{section}.tables.{key} is a table of stage {stage_of[key]}, configured under "
+                                f"{other}.tables; {section}.tables holds the ids of stage(s) {', '.join(stages)} "
+                                f"({_nearest(key, here)})")
+        missing = [t for t in here if t not in tables]
+        if missing:
+            problems.append(f"{section}.tables has no section for {', '.join(missing)} (tables.yaml ids of "
+                            f"stage(s) {', '.join(stages)}: rule all builds every table)")
+    if problems:
+        raise ConfigError(f"{where}: table sections that do not match workflow/redsup/data/tables.yaml:\n"
+                          + "\n".join(f"  - {p}" for p in problems))
