@@ -27,7 +27,7 @@ rule calibration_eval:
     params:
         parent=lambda wc: calib_plan.parent_of(config, scenes_of, wc.dataset, wc.mode, wc.method),
     wildcard_constraints:
-        mode=r"[A-Za-z]+",
+        mode=calib_plan.SEED_MODE,
         method=calib_plan.METHOD_PATTERN,
     threads: 1
     resources:
@@ -54,7 +54,7 @@ rule calibration_series:
     params:
         parent=lambda wc: calib_plan.parent_of(config, scenes_of, wc.dataset, wc.mode, f"series_{wc.split}"),
     wildcard_constraints:
-        mode=r"[A-Za-z]+",
+        mode=calib_plan.SEED_MODE,
         split=r"train|test|long",
     threads: 1
     resources:

@@ -2,8 +2,8 @@
 #
 # train_depth    results/depth/models/{dataset}/{mode}[/seed{k}].pt one model (M, S, MS, M_frontback, ...) per seed,
 #                and .json beside it: its meta (sizes, training summary, validation history) and configuration
-# predict_depth  results/depth/predictions/{dataset}/{mode}/{scene}.npz   raw network depth of every frame
-#                (the mode's model of calibration.model_dataset when set, else of the dataset)
+# predict_depth  results/depth/predictions/{dataset}/{mode}[/seed{k}]/{scene}.npz   raw network depth of every
+#                frame (the mode's model of calibration.model_dataset when set, else of the dataset; seed k)
 # depth_eval     results/depth/eval/{run}.json                      one configuration (a child run)
 # depth_figure   results/figures/<id>.png                           Figs. 4 and 5 (their tables: rule table)
 # galteland_figure results/figures/galteland_fig4_<n>.png           Galteland's progression / qualitative figures
@@ -56,7 +56,7 @@ rule predict_depth:
     benchmark:
         "results/benchmarks/predict_depth/depth/predictions/{dataset}/{mode}/{scene}.tsv",
     wildcard_constraints:
-        mode=r"[A-Za-z0-9_]+",
+        mode=r"[A-Za-z0-9_]+(/seed[1-9][0-9]*)?",
     threads: COMPUTE_THREADS
     resources:
         mem_mb=job_mem_mb(2000),

@@ -8,14 +8,17 @@ Each table of McCraith ch. 5 is a section ``calibration.tables.<table id>`` of c
   (Tables 3, 4; row label = the value as %g);
 - ``series: <split>``  the per-frame scale along the scenes of that split (Fig. 1's table).
 
-A run is ``<dataset>/<mode>/<method>`` (``series_<split>`` for a series): one ``calibration_eval`` (or
-``calibration_series``) job writing ``results/calibration/<run>.json``.
+A run is ``<dataset>/<mode>[/seed<k>]/<method>`` (``series_<split>`` for a series): one ``calibration_eval`` (or
+``calibration_series``) job writing ``results/calibration/<run>.json``. A method row reads one run per training seed of
+the depth model (``depth.models``: the model of ``calibration.model_dataset`` or ``dataset``, mode ``mode``); the
+table shows the mean over the seeds. Fig. 1's series reads the first seed's model.
 """
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping, Sequence
 
 from redsup.calib.names import FIG1_GT_ROW, FIG1_OURS_ROW, FIG1_ROAD_ROW, FIG1_SINGLE_ROW, road_method
+from redsup.depth.configs import n_seeds
 
 METHOD_PATTERN = r"gt_median|single_train|single_test|fixed_plane|road_L[0-9.]+_W[0-9.]+"
 SERIES_PREFIX = "series_"
@@ -42,18 +45,31 @@ def series_rows() -> list[str]:
     return [FIG1_GT_ROW, FIG1_SINGLE_ROW, FIG1_OURS_ROW, FIG1_ROAD_ROW]
 
 
-def run_name(cal: Mapping, method: str) -> str:
-    return f"{cal['dataset']}/{cal['mode']}/{method}"
+SEED_MODE = r"[A-Za-z]+(/seed[1-9][0-9]*)?"  # a run's mode part: the depth mode, then the seed (none: seed 0)
+
+
+def model_seeds(config: Mapping) -> list[str]:
+    """The mode part of a run per training seed of the calibrated depth model: ``M``, ``M/seed1``, ..."""
+    cal = config["calibration"]
+    source = cal.get("model_dataset") or cal["dataset"]
+    n = n_seeds(config["depth"], f"{source}/{cal['mode']}")
+    return [cal["mode"]] + [f"{cal['mode']}/seed{k}" for k in range(1, n)]
+
+
+def run_name(cal: Mapping, method: str, mode: str | None = None) -> str:
+    return f"{cal['dataset']}/{mode or cal['mode']}/{method}"
 
 
 def split_run(run: str) -> tuple[str, str, str]:
-    """(dataset, mode, method) of a run name."""
-    dataset, mode, method = run.split("/")
+    """(dataset, mode (with its ``/seed<k>`` part), method) of a run name."""
+    dataset, rest = run.split("/", 1)
+    mode, _, method = rest.rpartition("/")
     return dataset, mode, method
 
 
 def rows(config: Mapping, scenes_of: Callable[[str], list[str]]) -> dict[str, list[tuple[str, str, None]]]:
-    """table id -> [(row label, run, None)]; tables whose dataset has no scene of the needed split are left out."""
+    """table id -> [(row label, run, None)], a method row once per training seed of the depth model (in seed
+    order); tables whose dataset has no scene of the needed split are left out."""
     cal = config["calibration"]
     scenes = list(scenes_of(cal["dataset"]))
 
@@ -62,8 +78,9 @@ def rows(config: Mapping, scenes_of: Callable[[str], list[str]]) -> dict[str, li
 
     out: dict[str, list] = {}
     if has("test"):
+        modes = model_seeds(config)
         for table, methods in table_methods(cal).items():
-            out[table] = [(label, run_name(cal, m), None) for label, m in methods]
+            out[table] = [(label, run_name(cal, m, mode), None) for label, m in methods for mode in modes]
     for table, t in cal["tables"].items():
         if "series" in t and has(t["series"]) and has("test"):
             run = run_name(cal, SERIES_PREFIX + t["series"])
@@ -151,7 +168,8 @@ def table_frame(table_id: str, config: Mapping, rows: Sequence[tuple], results: 
             note += ". " + str(tcfg["note"]).format(length=float(cal["length"]), width=float(cal["width"])).rstrip(".")
         return TableFrame(ours, {}, note)
     ours, noise, info = calib_tables.method_frame([(label, results[run]) for label, run, _ in rows],
-                                                  index=VARY_INDEX.get(tcfg.get("vary"), "Method"))
+                                                  index=VARY_INDEX.get(tcfg.get("vary"), "Method"),
+                                                  pair=f"{cal['dataset']}/{cal['mode']}")
     what = str(tcfg.get("note", "")).format(length=float(cal["length"]), width=float(cal["width"]))
     return TableFrame(ours, noise, calib_tables.method_note(info, cal, config.get("profile"), what))
 

@@ -40,14 +40,19 @@ def _frame(rows: Mapping[str, Mapping], index_name: str) -> pd.DataFrame:
     return df
 
 
-def method_frame(rows: Sequence[tuple[str, Mapping]], index: str = "Method") -> tuple[pd.DataFrame, dict, dict]:
-    """(ours, noise, info) of a method table: ``rows`` = [(label, method result)]. Every row must have
-    been evaluated on the same frames (ValueError otherwise); noise = a bootstrap record per metric cell
-    over those frames (paired across rows: same units). info: frames, failed fits and reasons per row."""
-    from redsup.tables.noise import bootstrap
+def method_frame(rows: Sequence[tuple[str, Mapping]], index: str = "Method", pair: str | None = None
+                 ) -> tuple[pd.DataFrame, dict, dict]:
+    """(ours, noise, info) of a method table: ``rows`` = [(label, method result)], a label once per training seed
+    of the depth model (in seed order). Every result must have been evaluated on the same frames (ValueError
+    otherwise). One seed: the row is its result, the noise a bootstrap record per metric cell over those frames
+    (paired across rows: same units). Several: the row is the mean over the seeds, the noise their seed record
+    (``pair`` names the models: rows pair seed by seed) with the seed mean's bootstrap over the frames. info:
+    frames, seeds, failed fits and reasons per row."""
+    from redsup.tables.noise import bootstrap, seeds, with_sampling
 
     units = None
-    table, noise, info = {}, {}, {"frames": 0, "failed": {}, "not_evaluable": []}
+    by_label: dict[str, list[Mapping]] = {}
+    info = {"frames": 0, "seeds": 0, "failed": {}, "not_evaluable": []}
     for label, result in rows:
         these = sorted(per_frame(result, "abs_rel"))
         if units is None:
@@ -57,11 +62,23 @@ def method_frame(rows: Sequence[tuple[str, Mapping]], index: str = "Method") -> 
         elif these != units:
             raise ValueError(f"row {label!r} ({result['method']}) is evaluated on {len(these)} frames, the first "
                              f"row on {len(units)}: every row of a table must average the same frames")
-        table[label] = metrics_row(result)
-        if these:
-            noise[label] = {COLUMNS[k]: bootstrap(per_frame(result, k)) for k in METRICS}
+        by_label.setdefault(label, []).append(result)
         if result.get("failed"):
-            info["failed"][label] = list(result["failed"])
+            info["failed"].setdefault(label, []).extend(result["failed"])
+    table, noise = {}, {}
+    for label, results in by_label.items():
+        info["seeds"] = max(info["seeds"], len(results))
+        boots = {COLUMNS[k]: [bootstrap(per_frame(r, k)) for r in results] for k in METRICS} if units else {}
+        if len(results) == 1:
+            table[label] = metrics_row(results[0])
+            if units:
+                noise[label] = {col: b[0] for col, b in boots.items()}
+            continue
+        each = [metrics_row(r) for r in results]
+        table[label] = {col: (int(each[0][col]) if col == "frames" else float(np.mean([e[col] for e in each])))
+                        for col in each[0]}
+        if units:
+            noise[label] = {col: with_sampling(seeds([e[col] for e in each], pair), boots[col]) for col in boots}
     return _frame(table, index), noise, info
 
 
@@ -70,10 +87,14 @@ def method_note(info: Mapping, cal: Mapping, profile, what: str = "", limit: int
     fallback = {"hold": "the nearest successful frame's scale in the same scene (the raw output, scale 1, "
                         "when none succeeded)",
                 "raw": "the raw network output (scale 1)"}[cal.get("fallback", "hold")]
-    parts = [f"Ours: {cal['dataset']}, depth model {cal['mode']}, profile {profile}"]
+    model = f"depth model {cal['mode']}" + (f" trained with {info['seeds']} seeds (mean ± std over them)"
+                                            if info.get("seeds", 1) > 1 else "")
+    parts = [f"Ours: {cal['dataset']}, {model}, profile {profile}"]
     if what:
         parts.append(what.rstrip("."))
-    parts.append(f"every row averages the same {info['frames']} test frames (paired bootstrap ± over them); "
+    spread = ("paired bootstrap ± over them" if info.get("seeds", 1) <= 1 else
+              "± = std over the seeds; intervals add the paired bootstrap over the frames")
+    parts.append(f"every row averages the same {info['frames']} test frames ({spread}); "
                  "metrics not median-scaled except the GT scaling rows; scale err = median |scale / per-frame "
                  "GT scale - 1|; coverage = fraction of frames where the method's own estimate succeeded, "
                  f"the others use {fallback} (the thesis gives no fallback)")

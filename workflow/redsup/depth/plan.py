@@ -196,8 +196,9 @@ def models(config: Mapping, scenes_of) -> list[str]:
 
 
 def prediction_model(config: Mapping, dataset: str, mode: str, scenes_of) -> str:
-    """Checkpoint that ``predict_depth`` runs on ``dataset``'s frames: the ``<mode>`` model (seed 0) of
-    ``calibration.model_dataset`` for the calibrated dataset when that is set, else of ``dataset`` itself.
+    """Checkpoint that ``predict_depth`` runs on ``dataset``'s frames: the ``<mode>`` model (``<mode>/seed<k>``:
+    that training seed's) of ``calibration.model_dataset`` for the calibrated dataset when that is set, else of
+    ``dataset`` itself.
     A model that no configured training can produce is an error naming what to set."""
     cal = config["calibration"]
     source = (cal.get("model_dataset") or dataset) if dataset == cal["dataset"] else dataset
