@@ -52,7 +52,7 @@ def model_seeds(config: Mapping) -> list[str]:
     """The mode part of a run per training seed of the calibrated depth model: ``M``, ``M/seed1``, ..."""
     cal = config["calibration"]
     source = cal.get("model_dataset") or cal["dataset"]
-    n = n_seeds(config["depth"], f"{source}/{cal['mode']}")
+    n = n_seeds(config.get("depth") or {"models": []}, f"{source}/{cal['mode']}")  # no depth section: one seed
     return [cal["mode"]] + [f"{cal['mode']}/seed{k}" for k in range(1, n)]
 
 
