@@ -238,16 +238,17 @@ def _fake_result(method, abs_rel, units=("test_000/000000", "test_000/000001", "
 
 CAL = {"dataset": "world_x", "mode": "M", "length": 30.0, "width": 3.0, "fallback": "hold",
        "tables": {"mccraith_ch5_table1": {"rows": [
-                      {"label": "(a) GT Single Scaling (training set)", "method": "single_train"},
-                      {"label": "(b) GT Single Scaling (testing set)", "method": "single_test"},
-                      {"label": "(c) Fixed road plane", "method": "fixed_plane"},
-                      {"label": "(d) Ours", "method": "ours"},
-                      {"label": "GT Scaling (per-frame median, reference)", "method": "gt_median"}],
+                      {"label": "(a) GT Single Scaling (training set)", "run": "single_train"},
+                      {"label": "(b) GT Single Scaling (testing set)", "run": "single_test"},
+                      {"label": "(c) Fixed road plane", "run": "fixed_plane"},
+                      {"label": "(d) Ours", "run": "ours"},
+                      {"label": "GT Scaling (per-frame median, reference)", "run": "gt_median"}],
                       "note": "box {width:g} x {length:g}"},
-                  "mccraith_ch5_table2": {"rows": [{"label": "Godard et al. [2019]", "method": "gt_median"},
-                                                   {"label": "Ours", "method": "ours"}]},
-                  "mccraith_ch5_table3": {"vary": "length", "values": [6, 10, 30]},
-                  "mccraith_ch5_table4": {"vary": "width", "values": [0.5, 3]},
+                  "mccraith_ch5_table2": {"rows": [{"label": "Godard et al. [2019]", "run": "gt_median"},
+                                                   {"label": "Ours", "run": "ours"}]},
+                  "mccraith_ch5_table3": {"rows": [{"label": "{length}", "run": "ours", "sweep": {"length": [6, 10, 30]}}]},
+                  "mccraith_ch5_table4": {"rows": [{"label": "{width}", "run": "ours", "sweep": {"width": "$values"}}],
+                                          "values": [0.5, 3]},
                   "mccraith_ch5_fig1": {"series": "long"}}}
 
 

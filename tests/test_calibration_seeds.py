@@ -65,8 +65,8 @@ def test_rows_differing_in_frames_are_refused():
 
 def _config(n_seeds):
     cal = {"dataset": "world_kitti", "model_dataset": None, "mode": "M", "length": 30.0, "width": 3.0,
-           "tables": {"t1": {"rows": [{"label": "(d) Ours", "method": "ours"}, {"label": "GT", "method": "gt_median"}]},
-                      "t3": {"vary": "length", "values": [10, 30]}, "f1": {"series": "long"}}}
+           "tables": {"t1": {"rows": [{"label": "(d) Ours", "run": "ours"}, {"label": "GT", "run": "gt_median"}]},
+                      "t3": {"rows": [{"label": "{length}", "run": "ours", "sweep": {"length": [10, 30]}}]}, "f1": {"series": "long"}}}
     return {"calibration": cal, "detection": {"camera": "cam_front"},
             "depth": {"models": [{"dataset": "world_kitti", "mode": "M", "seeds": n_seeds}]}}
 

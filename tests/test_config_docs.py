@@ -63,3 +63,11 @@ def test_decisions_name_studies_that_exist():
     for doc in sorted((ROOT / "docs" / "decisions").glob("*.md")):
         for script in re.findall(r"studies/[a-z_0-9]+\.(?:py|yaml)", doc.read_text()):
             assert (ROOT / script).is_file(), f"{doc.name}: {script}"
+
+
+def test_config_names_scripts_that_exist():
+    """A caption note or comment of config.yaml that cites a script (a study, a benchmark) names one the repo has."""
+    named = re.findall(r"\b((?:benchmarks|studies|tools|drills)/[a-z_0-9]+\.py)\b", CONFIG.read_text())
+    assert named, "config.yaml cites no script any more: drop this test"
+    missing = sorted({s for s in named if not (ROOT / s).is_file()})
+    assert not missing, missing

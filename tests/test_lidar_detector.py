@@ -401,8 +401,9 @@ def _ld_config():
           "eval": {"recall": "R40", "iou": [0.7, 0.5]},
           "runs": {"a": {}, "b": {}},
           "tables": {"mccraith_ch7_table1": {"moderate_label": "Moderate", "lifting_row": "McCraith et al. [2022] †",
-                                             "rows": {"ours†": "a", "CenterPoint † Yin et al. [2021]": "b"}},
-                     "mccraith_ch7_table3": {"moderate_label": "Medium", "rows": {"0": "a", "2": "a"}}}}
+                                             "rows": [{"label": "ours†", "run": "a"},
+                                                      {"label": "CenterPoint † Yin et al. [2021]", "run": "b"}]},
+                     "mccraith_ch7_table3": {"moderate_label": "Medium", "rows": [{"label": "0", "run": "a"}, {"label": "2", "run": "a"}]}}}
     return {"seed": 10, "profile": "tiny", "lidar_detector": ld,
             "lifting": {"seeds": [0, 1, 2], "full_method": "full", "runs": {"full": {}}}}
 
@@ -470,7 +471,7 @@ def test_plan_rows_read_the_lifting_full_method_and_share_runs():
     with pytest.raises(ValueError, match="full_method"):
         plan.rows(config)
     config = _ld_config()
-    config["lidar_detector"]["tables"]["mccraith_ch7_table3"]["rows"]["1"] = "c"
+    config["lidar_detector"]["tables"]["mccraith_ch7_table3"]["rows"].append({"label": "1", "run": "c"})
     with pytest.raises(ValueError, match="unknown configurations"):
         plan.check_tables(config["lidar_detector"])
 

@@ -383,7 +383,8 @@ def _plan_config():
             "runs": {"a": spec,
                      "b": {"points": "mask", "level": "cityscapes", "point_loss": "squared",
                            "terms": ["supervised_box"], "yaw": {"kind": "bins", "n_bins": 64}, "targets": "labels", "labels_from": "a"}},
-            "tables": {"t1": {"rows": {"(x)": "a", "(y)": "b"}, "note": "N1"}, "t2": {"rows": {"(z)": "a"}}},
+            "tables": {"t1": {"rows": [{"label": "(x)", "run": "a"}, {"label": "(y)", "run": "b"}], "note": "N1"},
+                       "t2": {"rows": [{"label": "(z)", "run": "a"}]}},
             "full_method": "a"}
     return {"seed": 100, "profile": "tiny", "lifting": lift}
 
@@ -418,8 +419,8 @@ def test_plan_runs_rows_and_inputs_per_seed():
     with pytest.raises(ValueError, match="labels_from"):
         plan.run_inputs(bad, scenes, "b", 0)
     with pytest.raises(ValueError, match="unknown configurations"):
-        plan.rows({**config, "lifting": {**cfg, "tables": {"t": {"rows": {"(q)": "nope"}}}}})
-    text = row_summary(cfg["tables"]["t1"]["rows"], cfg["runs"])
+        plan.rows({**config, "lifting": {**cfg, "tables": {"t": {"rows": [{"label": "(q)", "run": "nope"}]}}}})
+    text = row_summary([(r["label"], r["run"]) for r in cfg["tables"]["t1"]["rows"]], cfg["runs"])
     assert "(x) = a (mask points, coco detector, outlier_aware, alignment+multiview, 64 bins)" in text
     assert "(y) = b (mask points, cityscapes detector, supervised by labels, 64 bins)" in text
 

@@ -82,7 +82,7 @@ def test_an_id_of_another_stage_is_rejected():
 
 def test_galteland_ids_belong_to_the_depth_section():
     raw = raw_config()
-    raw["lifting"]["tables"]["galteland_table4_1"] = {"rows": {"x": next(iter(raw["lifting"]["runs"]))}}
+    raw["lifting"]["tables"]["galteland_table4_1"] = {"rows": [{"label": "x", "run": next(iter(raw["lifting"]["runs"]))}]}
     with pytest.raises(config_lib.ConfigError, match=r"stage galteland, configured under depth\.tables"):
         load_as_the_workflow(raw)
 

@@ -27,8 +27,10 @@ pytestmark = pytest.mark.workflow
 
 TOY = "toy_ch5_width"
 REFERENCE = "mccraith_ch5_table4"   # the real table whose runs (widths 1 and 3 m of the tiny profile) the toy reads
-# the toy's config section: calibration.tables.toy_ch5_width (the sweep shape of workflow/schemas/calibration)
-TOY_CONFIG = {"vary": "width", "values": [1, 3], "note": "toy: road points with |X| < width and Z < {length:g} m"}
+# the toy's config section: calibration.tables.toy_ch5_width (the one row grammar: a row of `ours` swept over widths)
+TOY_WIDTHS = [1, 3]
+TOY_CONFIG = {"rows": [{"label": "{width}", "run": "ours", "sweep": {"width": TOY_WIDTHS}}],
+              "note": "toy: road points with |X| < width and Z < {length:g} m"}
 CLAIM = "Toy: the 3 m road box beats the 1 m one"
 # its tables.yaml entry (no paper values: the table shows ours only, as data_summary does)
 TOY_ENTRY = f"""
@@ -69,8 +71,8 @@ def _add_toy(repo: Path) -> None:
     config_path = repo / "config.yaml"
     config = yaml_load(config_path.read_text())
     sweep = redsup_config.resolve({**config, "profile": "tiny"})["calibration"]["tables"][REFERENCE]
-    assert sweep.get("vary") == "width" and set(TOY_CONFIG["values"]) <= set(sweep["values"]), \
-        f"the tiny profile's {REFERENCE} no longer has the widths {TOY_CONFIG['values']} the toy reuses: {sweep}"
+    assert set(TOY_WIDTHS) <= set(sweep["values"]), \
+        f"the tiny profile's {REFERENCE} no longer has the widths {TOY_WIDTHS} the toy reuses: {sweep}"
     tiny = config["profiles"]["tiny"].get("calibration", {}).get("tables", {})
     assert TOY not in config["calibration"]["tables"] and TOY not in tiny
     config["calibration"]["tables"][TOY] = TOY_CONFIG

@@ -333,10 +333,11 @@ def test_seed_runs_and_seed_rows(tmp_path):
     from redsup.velocity import tables as velocity_tables
 
     config = {"profile": "tiny", "velocity": {
-        "seeds": 3, "configurations": [{"name": "geometric", "label": "geometric reprojection", "method": "geometric"},
-                                       {"name": "mlp_tracker", "label": "Ours (MLP-tracker)", "method": "mlp",
+        "seeds": 3, "configurations": [{"name": "geometric", "method": "geometric"},
+                                       {"name": "mlp_tracker", "method": "mlp",
                                         "train_on": "tracker"}],
-        "tables": {"t2": {"layout": "errors", "rows": ["geometric", "mlp_tracker"]}}}}
+        "tables": {"t2": {"layout": "errors", "rows": [{"label": "geometric reprojection", "run": "geometric"},
+                                                         {"label": "Ours (MLP-tracker)", "run": "mlp_tracker"}]}}}}
     assert plan.seed_runs(config, "mlp_tracker") == ["mlp_tracker", "mlp_tracker_seed1", "mlp_tracker_seed2"]
     assert plan.seed_runs(config, "geometric") == ["geometric"]
     assert plan.parse_run("mlp_tracker_seed2") == ("mlp_tracker", 2)

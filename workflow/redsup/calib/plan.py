@@ -2,10 +2,11 @@
 
 Each table of McCraith ch. 5 is a section ``calibration.tables.<table id>`` of config.yaml, one of
 
-- ``rows: [{label, method}, ...]``  one row per scaling method (Tables 1, 2); ``method`` is a name of
-  ``redsup.calib.methods`` or ``ours`` (the road box ``calibration.length`` x ``calibration.width``);
-- ``vary: length|width, values: [...]``  one road-box row per value, the other side at its default
-  (Tables 3, 4; row label = the value as %g);
+- ``rows:`` in the one row grammar of every stage (``redsup.tables.rows``): ``{label, run}`` with ``run`` a
+  scaling method of ``redsup.calib.methods`` or ``ours`` (the road box ``calibration.length`` x
+  ``calibration.width``); ``sweep: {length | width: [...]}`` on ``ours`` gives one road-box row per value, the
+  other side at its default (Tables 3, 4: ``label: "{length}"``, the value as %g; the index column is named after
+  the swept side);
 - ``series: <split>``  the per-frame scale along the scenes of that split (Fig. 1's table).
 
 A run is ``<dataset>/<mode>[/seed<k>]/<method>`` (``series_<split>`` for a series): one ``calibration_eval`` (or
@@ -19,14 +20,22 @@ from collections.abc import Callable, Iterable, Mapping, Sequence
 
 from redsup.calib.names import FIG1_GT_ROW, FIG1_OURS_ROW, FIG1_ROAD_ROW, FIG1_SINGLE_ROW, road_method
 from redsup.depth.configs import n_seeds
+from redsup.tables.rows import run_rows, swept_fields
 
 METHOD_PATTERN = r"gt_median|single_train|single_test|fixed_plane|road_L[0-9.]+_W[0-9.]+"
 SERIES_PREFIX = "series_"
 VARY_INDEX = {"length": "Length (m)", "width": "Width (m)"}
 
 
-def _method(name: str, cal: Mapping) -> str:
-    return road_method(cal["length"], cal["width"]) if name == "ours" else name
+ROAD_SIDES = ("length", "width")
+
+
+def _method(name: str, cal: Mapping, sides: Mapping, where: str) -> str:
+    if name != "ours":
+        if sides:
+            raise KeyError(f"{where}: only the road box of 'ours' is swept ({sorted(sides)} on {name!r})")
+        return name
+    return road_method(**{"length": cal["length"], "width": cal["width"], **sides})
 
 
 def table_methods(cal: Mapping) -> dict[str, list[tuple[str, str]]]:
@@ -34,11 +43,19 @@ def table_methods(cal: Mapping) -> dict[str, list[tuple[str, str]]]:
     out = {}
     for table, t in cal["tables"].items():
         if "rows" in t:
-            out[table] = [(str(r["label"]), _method(r["method"], cal)) for r in t["rows"]]
-        elif "vary" in t:
-            fixed = {"length": cal["length"], "width": cal["width"]}
-            out[table] = [(f"{float(v):g}", road_method(**{**fixed, t["vary"]: v})) for v in t["values"]]
+            where = f"calibration.tables.{table}"
+            out[table] = []
+            for label, run, swept in run_rows(t, where):
+                if set(swept) - set(ROAD_SIDES):
+                    raise KeyError(f"{where}: a row sweeps {sorted(swept)}; a calibration row sweeps {ROAD_SIDES}")
+                out[table].append((label, _method(run, cal, {k: float(v) for k, v in swept.items()}, where)))
     return out
+
+
+def index_name(table_cfg: Mapping) -> str:
+    """The index column: the swept road side's name when the rows sweep exactly one, else ``Method``."""
+    swept = swept_fields(table_cfg)
+    return VARY_INDEX[swept[0]] if len(swept) == 1 and swept[0] in VARY_INDEX else "Method"
 
 
 def series_rows() -> list[str]:
@@ -168,7 +185,7 @@ def table_frame(table_id: str, config: Mapping, rows: Sequence[tuple], results: 
             note += ". " + str(tcfg["note"]).format(length=float(cal["length"]), width=float(cal["width"])).rstrip(".")
         return TableFrame(ours, {}, note)
     ours, noise, info = calib_tables.method_frame([(label, results[run]) for label, run, _ in rows],
-                                                  index=VARY_INDEX.get(tcfg.get("vary"), "Method"),
+                                                  index=index_name(tcfg),
                                                   pair=f"{cal['dataset']}/{cal['mode']}")
     what = str(tcfg.get("note", "")).format(length=float(cal["length"]), width=float(cal["width"]))
     return TableFrame(ours, noise, calib_tables.method_note(info, cal, config.get("profile"), what))

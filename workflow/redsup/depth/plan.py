@@ -1,8 +1,9 @@
 """The depth stage's tables as data (the table contract, redsup.tables.contract; torch-free).
 
 Every table of McCraith ch. 4 and Galteland (Tables 4.4, 5.1) is a section ``depth.tables.<table id>`` of
-config.yaml: table-level values (steps, learning rates, lists to sweep) and ``rows:``, a list of row
-templates. A template's fields (all optional, defaults from ``depth.adaptation``):
+config.yaml: table-level values (steps, learning rates, lists to sweep) and ``rows:`` in the one row grammar of
+every stage (``redsup.tables.rows``: ``{label, template, sweep}``). A depth row is a ``template``; its fields
+(all optional, defaults from ``depth.adaptation``):
 
     kind     instance | sequential | direct           (instance: adaptation evaluated at checkpoints)
     dataset, mode                                      the model ``results/depth/models/<dataset>/<mode>.pt``
@@ -11,18 +12,14 @@ templates. A template's fields (all optional, defaults from ``depth.adaptation``
     sources  the test sample (default: the mode's)     ``[]``: prediction only
     groups   adapted modules (default: adaptation.groups; ``[]``: no adaptation, the baseline)
     lr, steps, step                                    step = the checkpoint the row reads (instance)
-    group    comparison group: rows of a group are averaged over the same frames
-    label    row label, a format string: ``{field}`` or ``{field|formatter}`` with the formatters
-             modules (ch. 4 Table 1 names), power (10^-k), initial (0 -> "Initial"), name (depth.names)
-    each     {field: list}: one row per combination (in order)
+    group    comparison group (formatted as the label): rows of a group are averaged over the same frames
+    branch   the system's prediction branch (manydepth: ``teacher``)
 
-A string value ``$key`` stands for the table-level value ``key`` (so a profile overrides one list, not the
-rows). Rows whose model is not trained or whose test data does not exist are left out.
+The label's formatters: modules (ch. 4 Table 1 names), power (10^-k), initial (0 -> "Initial"), name
+(depth.names). Rows whose model is not trained or whose test data does not exist are left out.
 """
 from __future__ import annotations
 
-import itertools
-import re
 from collections.abc import Callable, Mapping, Sequence
 
 from dataclasses import replace
@@ -30,23 +27,21 @@ from dataclasses import replace
 from redsup.depth.configs import (METRIC_COLUMNS, EvalSpec, Row, eval_inputs, groups_label, lr_label,
                                   mode_sources, n_seeds, parse_model, plan as plan_runs, seed_models, system_of,
                                   system_settings, train_settings, trained_models)
+from redsup.tables.rows import expand as table_rows_of, fill
 
-STAGES = ("depth", "galteland")
-ROW_FIELDS = ("kind", "dataset", "mode", "test", "split", "frames", "sources", "groups", "lr", "steps", "step",
-              "group", "label", "branch", "each")
+TEMPLATE_FIELDS = ("kind", "dataset", "mode", "test", "split", "frames", "sources", "groups", "lr", "steps",
+                   "step", "group", "branch")
 
 
 def _tables_of_stage(registry=None) -> list[str]:
     from redsup.tables.registry import load_registry
 
     reg = registry or load_registry()
-    return [t for t, e in reg["tables"].items() if e["stage"] in STAGES]
+    stages = {stage for stage, module in reg["stage_modules"].items() if module == __name__}   # depth, galteland
+    return [t for t, e in reg["tables"].items() if e["stage"] in stages]
 
 
 # ------------------------------------------------------------------------------------------ rows
-_FIELD = re.compile(r"\{(\w+)(?:\|(\w+))?\}")
-
-
 def _formatters(depth_cfg: Mapping) -> dict[str, Callable]:
     names = depth_cfg["names"]
     return {
@@ -54,28 +49,7 @@ def _formatters(depth_cfg: Mapping) -> dict[str, Callable]:
         "power": lambda v: lr_label(float(v)),
         "initial": lambda v: "Initial" if int(v) == 0 else str(v),
         "name": lambda v: names.get(v, v),
-        None: lambda v: f"{v:g}" if isinstance(v, float) else str(v),
     }
-
-
-def _fill(text: str, values: Mapping, fmt: Mapping[str, Callable]) -> str:
-    def one(m):
-        field, how = m.group(1), m.group(2)
-        if field not in values:
-            raise KeyError(f"row label {text!r}: unknown field {field!r}")
-        if how not in fmt:
-            raise KeyError(f"row label {text!r}: unknown formatter {how!r} (known: {sorted(k for k in fmt if k)})")
-        return fmt[how](values[field])
-    return _FIELD.sub(one, text)
-
-
-def _ref(value, table_cfg: Mapping, where: str):
-    if isinstance(value, str) and value.startswith("$"):
-        key = value[1:]
-        if key not in table_cfg:
-            raise KeyError(f"{where}: {value} names no value of the table section")
-        return table_cfg[key]
-    return value
 
 
 def expand_rows(table_id: str, depth_cfg: Mapping) -> list[Row]:
@@ -84,29 +58,21 @@ def expand_rows(table_id: str, depth_cfg: Mapping) -> list[Row]:
     a = depth_cfg["adaptation"]
     fmt = _formatters(depth_cfg)
     out = []
-    for i, template in enumerate(table_cfg["rows"]):
-        where = f"depth.tables.{table_id}.rows[{i}]"
-        unknown = sorted(set(template) - set(ROW_FIELDS))
-        if unknown:
-            raise KeyError(f"{where}: unknown field(s) {unknown} (known: {list(ROW_FIELDS)})")
-        fixed = {k: _ref(v, table_cfg, where) for k, v in template.items() if k != "each"}
-        each = {k: list(_ref(v, table_cfg, where)) for k, v in (template.get("each") or {}).items()}
-        for combo in itertools.product(*each.values()) if each else [()]:
-            v = {**fixed, **dict(zip(each, combo))}
-            kind = v.get("kind", "instance")
-            dataset, mode = v.get("dataset", a["dataset"]), v.get("mode", a["mode"])
-            test = v.get("test", dataset)
-            groups = tuple(v.get("groups", a["groups"]))
-            sources = tuple(v.get("sources", mode_sources(depth_cfg, mode)))
-            lr = float(v.get("lr", a["lr"])) if groups else 0.0
-            steps = int(v.get("steps", 0)) if kind != "instance" else 0
-            step = int(v.get("step", steps))
-            spec = EvalSpec(kind, f"{dataset}/{mode}", f"{test}/{v.get('split', 'test')}", v.get("frames", "short"),
-                            sources, groups, lr, steps, branch=str(v.get("branch", "")))
-            values = {**v, "kind": kind, "dataset": dataset, "mode": mode, "test": test, "groups": groups,
-                      "lr": lr, "steps": steps, "step": step}
-            label = _fill(v["label"], values, fmt) if "label" in v else groups_label(groups)
-            out.append(Row(label, spec, step, _fill(str(v.get("group", "")), values, fmt)))
+    for r in table_rows_of(table_cfg, f"depth.tables.{table_id}", TEMPLATE_FIELDS):
+        v = r.fields
+        kind = v.get("kind", "instance")
+        dataset, mode = v.get("dataset", a["dataset"]), v.get("mode", a["mode"])
+        test = v.get("test", dataset)
+        groups = tuple(v.get("groups", a["groups"]))
+        sources = tuple(v.get("sources", mode_sources(depth_cfg, mode)))
+        lr = float(v.get("lr", a["lr"])) if groups else 0.0
+        steps = int(v.get("steps", 0)) if kind != "instance" else 0
+        step = int(v.get("step", steps))
+        spec = EvalSpec(kind, f"{dataset}/{mode}", f"{test}/{v.get('split', 'test')}", v.get("frames", "short"),
+                        sources, groups, lr, steps, branch=str(v.get("branch", "")))
+        values = {**v, "kind": kind, "dataset": dataset, "mode": mode, "test": test, "groups": groups,
+                  "lr": lr, "steps": steps, "step": step}
+        out.append(Row(fill(r.label, values, fmt), spec, step, fill(str(v.get("group", "")), values, fmt)))
     return out
 
 

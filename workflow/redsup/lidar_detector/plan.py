@@ -8,7 +8,7 @@ A run is one configuration (``lidar_detector.runs.<conf>``) trained with one see
     lidar_detector_train  results/lidar_detector/{metrics,models,detections}/<conf>/seed<k>.{json,pt,npz}
     table                 results/tables/<table>.{md,csv,tex,score.json} (rule table)
 
-A table's config section ``lidar_detector.tables.<table>`` gives its ``rows`` (label -> configuration), the
+A table's config section ``lidar_detector.tables.<table>`` gives its ``rows`` ({label, run}: a configuration), the
 thesis' name of the moderate column (``moderate_label``) and optionally ``lifting_row``: the label of a row
 read from the ch. 6 stage, i.e. the runs of ``lifting.full_method`` (every seed of ``lifting.seeds``; their
 run ids carry the prefix ``lifting:``).
@@ -21,6 +21,7 @@ from redsup.tables.contract import parse_run, run_id, training_seed  # noqa: F40
 
 from redsup.lidar_detector.names import LIFTING
 from redsup.lifting import plan as lifting_plan
+from redsup.tables.rows import run_rows
 
 SPLIT_PREFIXES = {"train": ("train_", "long_"), "val": ("val_",), "test": ("test_",)}   # val: knobs (benchmarks)
 
@@ -53,26 +54,33 @@ def runs(config: Mapping, scenes_of=None) -> dict[str, dict]:
             for conf, spec in ld["runs"].items() for k in ld["seeds"]}
 
 
+def table_rows(ld: Mapping, table: str) -> list[tuple[str, str]]:
+    """(row label, configuration) of one table's own rows (``{label, run}``, the one row grammar of every stage,
+    ``redsup.tables.rows``); every row names a defined configuration."""
+    out = [(label, conf) for label, conf, _ in run_rows(ld["tables"][table], f"lidar_detector.tables.{table}")]
+    unknown = sorted({conf for _, conf in out} - set(ld["runs"]))
+    if unknown:
+        raise ValueError(f"config.yaml lidar_detector.tables.{table}.rows: unknown configurations {unknown} "
+                         f"(defined: {sorted(ld['runs'])})")
+    return out
+
+
 def check_tables(ld: Mapping) -> None:
-    """Every table row names a defined configuration."""
-    for table, tcfg in ld["tables"].items():
-        unknown = sorted(set(tcfg["rows"].values()) - set(ld["runs"]))
-        if unknown:
-            raise ValueError(f"config.yaml lidar_detector.tables.{table}.rows: unknown configurations {unknown} "
-                             f"(defined: {sorted(ld['runs'])})")
+    """Every table row names a defined configuration (the rules check it when the workflow is parsed)."""
+    for table in ld["tables"]:
+        table_rows(ld, table)
 
 
 def rows(config: Mapping, scenes_of=None) -> dict[str, list[tuple[str, str, None]]]:
     """Table id -> (row label, run, None), one entry per seed (a label repeats once per seed; table_frame
     averages them). The ``lifting_row`` (when configured) comes first, read from ``lifting.full_method``."""
     ld = config["lidar_detector"]
-    check_tables(ld)
     out = {}
     for table, tcfg in ld["tables"].items():
         lines = []
         if tcfg.get("lifting_row"):
             lines += [(tcfg["lifting_row"], LIFTING + r, None) for r in lifting_plan.full_method_runs(config)]
-        lines += [(label, run_id(conf, k), None) for label, conf in tcfg["rows"].items() for k in ld["seeds"]]
+        lines += [(label, run_id(conf, k), None) for label, conf in table_rows(ld, table) for k in ld["seeds"]]
         out[table] = lines
     return out
 

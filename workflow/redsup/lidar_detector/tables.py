@@ -19,7 +19,7 @@ import pandas as pd
 
 from redsup.det3d.kitti_eval import DIFFICULTIES
 from redsup.lidar_detector.names import LIFTING
-from redsup.tables.contract import TableFrame
+from redsup.tables.contract import TableFrame, parse_run
 from redsup.tables.noise import replicates, with_sampling
 from redsup.tables.noise import seeds as seed_record
 
@@ -92,7 +92,7 @@ def table_frame(table_id: str, config: dict, rows: list, results: dict) -> Table
         by_label.setdefault(label, []).append(results[run])
     ours, noise = build_table(tcfg["moderate_label"], by_label, recall=recall, second_iou=float(ld["eval"]["iou"][-1]))
     own = [run for _, run, _ in rows if not run.startswith(LIFTING)]        # this stage's runs
-    note = caption_note(config["profile"], results[own[0]] if own else {}, recall, len(set(tcfg["rows"].values())),
+    note = caption_note(config["profile"], results[own[0]] if own else {}, recall, len({parse_run(r)[0] for r in own}),
                         len(ld["seeds"]))
     if tcfg.get("lifting_row"):
         note += (f"; {tcfg['lifting_row']} = the ch. 6 method (lifting.full_method = "

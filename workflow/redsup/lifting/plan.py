@@ -7,14 +7,16 @@ A run is one configuration (``lifting.runs.<conf>``) trained with one seed index
     lifting_run     results/lifting/{metrics,info}/<conf>/seed<k>.json, results/lifting/models/<conf>/seed<k>.pt
     lifting_labels  results/lifting/labels/<conf>/seed<k>.npz   (the configurations named by some `labels_from`;
                     seed k's labels supervise seed k of the configuration that reads them)
-    table           results/tables/<table>.{md,csv,tex,score.json} (rule table: one row per label of
-                    ``lifting.tables.<table>.rows``, its value the mean over the seeds, the spread their std)
+    table           results/tables/<table>.{md,csv,tex,score.json} (rule table: one row per entry of
+                    ``lifting.tables.<table>.rows``, ``{label, run}`` in the one row grammar of every stage,
+                    ``redsup.tables.rows``; its value the mean over the seeds, the spread their std)
 """
 from __future__ import annotations
 
 from collections.abc import Mapping
 
 from redsup.tables.contract import parse_run, run_id, training_seed  # noqa: F401 (part of this plan)
+from redsup.tables.rows import run_rows
 
 
 def split_scenes(scene_ids: list[str], splits) -> list[str]:
@@ -84,12 +86,16 @@ def rows(config: Mapping, scenes_of=None) -> dict[str, list[tuple[str, str, None
     """Table id -> (row label, run, None), one entry per seed of the row's configuration (a label repeats
     once per seed; table_frame averages them). ``scenes_of`` is not needed (the rows do not depend on scenes)."""
     cfg = config["lifting"]
-    out = {}
-    for table, tcfg in cfg["tables"].items():
-        unknown = sorted(set(tcfg["rows"].values()) - set(cfg["runs"]))
-        if unknown:
-            raise ValueError(f"config.yaml lifting.tables.{table}.rows: unknown configurations {unknown}")
-        out[table] = [(label, run_id(conf, k), None) for label, conf in tcfg["rows"].items() for k in cfg["seeds"]]
+    return {table: [(label, run_id(conf, k), None) for label, conf in table_rows(cfg, table) for k in cfg["seeds"]]
+            for table in cfg["tables"]}
+
+
+def table_rows(cfg: Mapping, table: str) -> list[tuple[str, str]]:
+    """(row label, configuration) of one table (cfg = the ``lifting`` section)."""
+    out = [(label, conf) for label, conf, _ in run_rows(cfg["tables"][table], f"lifting.tables.{table}")]
+    unknown = sorted({conf for _, conf in out} - set(cfg["runs"]))
+    if unknown:
+        raise ValueError(f"config.yaml lifting.tables.{table}.rows: unknown configurations {unknown}")
     return out
 
 

@@ -12,17 +12,17 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from redsup.tables.contract import TableFrame
+from redsup.tables.contract import TableFrame, parse_run
 from redsup.tables.noise import replicates, with_sampling
 from redsup.tables.noise import seeds as seed_record
 
 DIFFICULTIES = ("easy", "moderate", "hard")
 
 
-def row_summary(rows: dict[str, str], runs: dict[str, dict]) -> str:
-    """'row = configuration (points, detector level, loss, terms, yaw)' for the caption."""
+def row_summary(rows: list[tuple[str, str]], runs: dict[str, dict]) -> str:
+    """'row = configuration (points, detector level, loss, terms, yaw)' for the caption; rows: (label, run)."""
     parts = []
-    for label, run in rows.items():
+    for label, run in rows:
         spec = runs[run]
         yaw = spec["yaw"]
         yaw_text = {"bins": f"{yaw.get('n_bins')} bins", "vector": "arctan",
@@ -102,5 +102,5 @@ def table_frame(table_id: str, config: dict, rows: list, results: dict) -> Table
             "matched to a car with the lifted centre within 1 m and the yaw within 20 degrees (mod 180); "
             + (tcfg.get("note") or "") + "; "
             + gt_count_note({r: results[r] for _, r, _ in rows[:1]}) + ". Rows: "
-            + row_summary(tcfg["rows"], cfg["runs"]))
+            + row_summary(list(dict.fromkeys((label, parse_run(run)[0]) for label, run, _ in rows)), cfg["runs"]))
     return TableFrame(ours=ours, noise=noise, note=note)

@@ -6,7 +6,7 @@ import importlib
 # pandas costs about a second of start-up in jobs that never write a table.
 _EXPORTS = {
     "claims": ("evaluate_check", "evaluate_claims", "evaluate_claims_on_paper", "headline_tau", "kendall_tau"),
-    "registry": ("DATA_DIR", "PAPER_VALUES_CSV", "REGISTRY_YAML", "STAGES", "align", "as_frame", "column_key",
+    "registry": ("DATA_DIR", "PAPER_VALUES_CSV", "REGISTRY_YAML", "align", "as_frame", "column_key",
                  "load_registry", "paper_directions", "paper_table", "paper_values", "row_key", "table_ids",
                  "table_info"),
     "writer": ("build_table", "fmt_value", "tex_escape", "write_scorecard", "write_table"),
@@ -21,7 +21,7 @@ def __getattr__(name: str):
 
 
 __all__ = [
-    "DATA_DIR", "PAPER_VALUES_CSV", "REGISTRY_YAML", "STAGES", "align", "as_frame", "build_table",
+    "DATA_DIR", "PAPER_VALUES_CSV", "REGISTRY_YAML", "align", "as_frame", "build_table",
     "column_key", "evaluate_check", "evaluate_claims", "evaluate_claims_on_paper", "fmt_value", "headline_tau",
     "kendall_tau", "load_registry", "paper_directions", "paper_table", "paper_values", "row_key",
     "table_ids", "table_info", "tex_escape", "write_scorecard", "write_table", "mlflow_plan",

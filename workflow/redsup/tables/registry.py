@@ -21,7 +21,6 @@ DATA_DIR = Path(__file__).resolve().parents[1] / "data"
 REGISTRY_YAML = DATA_DIR / "tables.yaml"
 PAPER_VALUES_CSV = DATA_DIR / "paper_values.csv"
 PAPER_COLUMNS = ["table_id", "row", "column", "value", "unit", "lower_is_better", "note"]
-STAGES = ("data", "velocity", "depth", "calibration", "lifting", "detector", "galteland")
 CHECK_TYPES = ("order", "best", "close", "range")
 
 

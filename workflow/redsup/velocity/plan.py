@@ -3,9 +3,9 @@
 ``velocity.configurations`` are the jobs (one child run each); ``velocity.tables.<table id>`` says what a
 table shows:
 
-- ``rows: [configuration names]`` with ``layout: errors | ablation`` (the columns: Table II's E_v per bin,
-  runtime and E_p; or the ablation's E_v on the test and abnormal clips): one row per configuration, labelled
-  with the configuration's ``label``. An MLP configuration is trained once per seed (``velocity.seeds``):
+- ``rows:`` in the one row grammar of every stage (``redsup.tables.rows``: ``{label, run}``, ``run`` a
+  configuration name) with ``layout: errors | ablation`` (the columns: Table II's E_v per bin, runtime and E_p;
+  or the ablation's E_v on the test and abnormal clips): one row per configuration. An MLP configuration is trained once per seed (``velocity.seeds``):
   runs ``<name>``, ``<name>_seed1``, ...; its row is the seed mean with the seed spread. A configuration
   without learning (geometric, constant) has one run and a paired bootstrap over the test vehicles.
 - ``counts: [splits]``: the annotated vehicles per distance bin of those clip splits (Table I).
@@ -17,12 +17,27 @@ from __future__ import annotations
 import re
 from collections.abc import Mapping, Sequence
 
+from redsup.tables.rows import run_rows
+
 SEED = re.compile(r"^(?P<name>.+?)_seed(?P<k>[1-9][0-9]*)$")
 LEARNED = ("mlp",)
 
 
 def configurations(config: Mapping) -> dict[str, dict]:
     return {c["name"]: c for c in config["velocity"]["configurations"]}
+
+
+def table_rows(config: Mapping, table_id: str) -> list[tuple[str, str]]:
+    """(row label, configuration) of a rows table (empty for a counts or figure table)."""
+    tc = config["velocity"]["tables"][table_id]
+    if "rows" not in tc:
+        return []
+    return [(label, run) for label, run, _ in run_rows(tc, f"velocity.tables.{table_id}", configurations(config))]
+
+
+def showing(config: Mapping, name: str) -> list[str]:
+    """The tables whose rows show configuration ``name``."""
+    return [t for t in config["velocity"]["tables"] if any(run == name for _, run in table_rows(config, t))]
 
 
 def seed_runs(config: Mapping, name: str) -> list[str]:
@@ -44,7 +59,7 @@ def runs(config: Mapping, scenes_of=None) -> dict[str, dict]:
     tables = config["velocity"]["tables"]
     out: dict[str, dict] = {}
     for name, c in configurations(config).items():
-        serving = [t for t, tc in tables.items() if name in tc.get("rows", ())]
+        serving = showing(config, name)
         for run in seed_runs(config, name):
             out[run] = {"configuration": name, "seed_index": parse_run(run)[1], "method": c["method"],
                         "tables": serving}
@@ -57,11 +72,10 @@ def runs(config: Mapping, scenes_of=None) -> dict[str, dict]:
 
 
 def rows(config: Mapping, scenes_of=None) -> dict[str, list[tuple[str, str, None]]]:
-    confs = configurations(config)
     out: dict[str, list[tuple[str, str, None]]] = {}
     for t, tc in config["velocity"]["tables"].items():
         if "rows" in tc:
-            out[t] = [(confs[n]["label"], run, None) for n in tc["rows"] for run in seed_runs(config, n)]
+            out[t] = [(label, run, None) for label, n in table_rows(config, t) for run in seed_runs(config, n)]
         elif "counts" in tc:
             out[t] = [(split.capitalize(), "clip_counts", None) for split in tc["counts"]]
         else:
@@ -79,7 +93,7 @@ def result_path(run: str) -> str:
 
 def parent(config: Mapping, name: str) -> str:
     """The MLflow parent of a configuration's runs: the first table that shows it."""
-    tables = [t for t, tc in config["velocity"]["tables"].items() if name in tc.get("rows", ())]
+    tables = showing(config, name)
     return tables[0] if tables else next(iter(config["velocity"]["tables"]))
 
 

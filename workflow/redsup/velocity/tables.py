@@ -10,6 +10,7 @@ import numpy as np
 import pandas as pd
 
 from redsup.fileio import save_npz_atomic, write_text_atomic
+from redsup.tables.rows import run_rows
 from redsup.velocity.data import TrackSet
 from redsup.velocity.metrics import BIN_NAMES, squared_error
 
@@ -44,7 +45,7 @@ def write_configuration_outputs(configuration: dict, metrics: dict, predictions:
         err = squared_error(predictions[split]["velocity"], tracks.velocity)
         per_track[split] = {"id": [f"{c}/{t}" for c, t in zip(tracks.clip, tracks.track_id)],
                             "bin": [int(b) for b in tracks.bins], "sq_err": [_plain(e) for e in err]}
-    record = {"name": configuration["name"], "label": configuration["label"],
+    record = {"name": configuration["name"],
               "configuration": configuration, "metrics": {k: _plain(v) for k, v in metrics.items()},
               "per_track": per_track,
               "bad_input": {split: {str(c): n for c, n in t.bad_input_per_clip().items()}
@@ -183,7 +184,7 @@ def table_note(config: dict, table_cfg: dict, results: dict | None = None) -> st
                      "± = bootstrap standard error over the test vehicles")
     if table_cfg.get("note"):
         parts.append(str(table_cfg["note"]).rstrip("."))
-    geometric = [n for n in table_cfg.get("rows", ()) if _method(config, n) == "geometric"]
+    geometric = [n for _, n, _ in run_rows(table_cfg, "velocity.tables") if _method(config, n) == "geometric"]
     if results and table_cfg.get("layout") == "errors" and geometric and geometric[0] in results:
         from redsup.velocity.diagnosis import diagnosis_note
 
