@@ -34,6 +34,8 @@ def test_run_rows_format_labels_and_carry_swept_parameters():
                                     ("3", "ours", {"width": 3})]
     assert swept_fields(table) == ["width"]
     assert run_rows({"counts": ["train"]}, "t") == []          # a table without rows
+    with pytest.raises(ValueError, match=r"t\.rows: unknown configurations \['nope'\] \(defined: \['ours'\]\)"):
+        run_rows({"rows": [{"label": "x", "run": "nope"}, {"label": "y", "run": "ours"}]}, "t", ["ours"])
 
 
 def test_named_formatters_and_literal_braces():

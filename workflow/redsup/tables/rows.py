@@ -98,15 +98,14 @@ def expand(table_cfg: Mapping, where: str, template_fields: Sequence[str] | None
 
 def run_rows(table_cfg: Mapping, where: str, known_runs=None) -> list[tuple[str, str, dict]]:
     """(formatted label, run, swept fields) of a table whose rows all name runs; ``known_runs`` (when given)
-    are the names a row may name."""
-    out = []
-    for r in expand(table_cfg, where):
-        if r.run is None:
-            raise KeyError(f"{where}: rows of this stage name a run (run: <name>), not a template")
-        if known_runs is not None and r.run not in known_runs:
-            raise KeyError(f"{where}: row {r.label!r} names {r.run!r}, not one of {sorted(known_runs)}")
-        out.append((fill(r.label, r.fields), r.run, r.fields))
-    return out
+    are the names a row may name (a ValueError lists every other one)."""
+    rows = expand(table_cfg, where)
+    if any(r.run is None for r in rows):
+        raise KeyError(f"{where}: rows of this stage name a run (run: <name>), not a template")
+    unknown = sorted({r.run for r in rows} - set(known_runs)) if known_runs is not None else []
+    if unknown:
+        raise ValueError(f"config.yaml {where}.rows: unknown configurations {unknown} (defined: {sorted(known_runs)})")
+    return [(fill(r.label, r.fields), r.run, r.fields) for r in rows]
 
 
 def swept_fields(table_cfg: Mapping) -> list[str]:
