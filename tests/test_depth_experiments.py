@@ -279,6 +279,32 @@ def test_seed_rows_are_averaged_with_their_spread(cfg):
     assert configs.seed_models("world_lyft/MD", 2)[1] == "world_lyft/MD/seed1"
 
 
+def test_timing_cells_of_seed_rows_hold_the_jobs_spread_only(cfg):
+    """An FPS cell of a row with several seeds: the mean of the seeds' FPS, its noise the seeds' values alone
+    (unpaired, no test-sampling part), so 2 test scenes (fewer than 5 clusters) still give the timing an interval;
+    the metric cells keep their scene-cluster bootstrap."""
+    from redsup.tables import noise as noise_lib
+
+    def result(seconds, value):
+        return {"records": [{"sequence": f"s{f % 2}", "frame": f, "step": 0, "seconds": seconds,
+                             "metrics": {k: value for k in configs.METRIC_COLUMNS}} for f in range(6)]}
+
+    labels = [r.label for r in plan.expand_rows("galteland_table4_2", cfg["depth"])][:2]
+    rows = [(labels[0], "a0", 0), (labels[0], "a1", 0), (labels[0], "a2", 0),
+            (labels[1], "b0", 0), (labels[1], "b1", 0), (labels[1], "b2", 0)]
+    results = {"a0": result(0.010, 0.2), "a1": result(0.011, 0.2), "a2": result(0.012, 0.2),
+               "b0": result(0.004, 0.3), "b1": result(0.0045, 0.3), "b2": result(0.005, 0.3)}
+    frame = plan.table_frame("galteland_table4_2", cfg, rows, results)
+    fps = frame.noise[labels[0]]["FPS"]
+    assert fps == {"kind": "seeds", "values": pytest.approx([100.0, 1000 / 11, 1000 / 12])}
+    assert frame.ours.at[labels[0], "FPS"] == pytest.approx((100 + 1000 / 11 + 1000 / 12) / 3)
+    assert frame.noise[labels[0]]["Abs Rel"]["n_clusters"] == 2          # the metrics: 2 scenes, no verdict
+    lo, hi, _ = noise_lib.difference_interval(frame.ours.at[labels[1], "FPS"], frame.ours.at[labels[0], "FPS"],
+                                              frame.noise[labels[1]]["FPS"], fps)
+    assert 0 < lo < hi                                                     # 224.1 against 91.4 FPS, decided
+    assert plan.timing_columns(cfg["depth"]["tables"]["galteland_table4_2"]) == ["FPS"]
+
+
 def test_a_table_caps_the_seeds_its_rows_read(cfg):
     """world_kitti/M with 3 training seeds: a table without ``seeds`` reads every seed's run (3 rows per label),
     one with ``seeds: 1`` only seed 0's."""

@@ -345,14 +345,18 @@ def test_seed_runs_and_seed_rows(tmp_path):
     assert [r[1] for r in rows] == ["geometric", "mlp_tracker", "mlp_tracker_seed1", "mlp_tracker_seed2"]
     assert plan.runs(config)["mlp_tracker_seed1"]["tables"] == ["t2"]
 
-    def record(e_v, sq_err):
+    def record(e_v, sq_err, ms=0.1):
         ids = [f"0/{i}" for i in range(len(sq_err))]
-        return {"metrics": {"test_E_v": e_v, "forward_ms_median": 0.1},
+        return {"metrics": {"test_E_v": e_v, "forward_ms_median": ms},
                 "per_track": {"test": {"id": ids, "bin": [0, 1, 2, 2], "sq_err": sq_err}}}
 
-    results = {"geometric": record(4.0, [1.0, 3.0, 7.0, 9.0]), "mlp_tracker": record(1.0, [1] * 4),
-               "mlp_tracker_seed1": record(2.0, [2] * 4), "mlp_tracker_seed2": record(3.0, [3] * 4)}
+    results = {"geometric": record(4.0, [1.0, 3.0, 7.0, 9.0]), "mlp_tracker": record(1.0, [1] * 4, 0.2),
+               "mlp_tracker_seed1": record(2.0, [2] * 4, 0.3), "mlp_tracker_seed2": record(3.0, [3] * 4, 0.7)}
     ours, noise = velocity_tables.configuration_table("errors", rows, results)
+    # the runtime: the mean of the three jobs' medians, their spread its noise; the single geometric run has none
+    assert ours.at["Ours (MLP-tracker)", "runtime (ms)"] == pytest.approx(0.4)
+    assert noise["Ours (MLP-tracker)"]["runtime (ms)"] == {"kind": "seeds", "values": [0.2, 0.3, 0.7]}
+    assert "runtime (ms)" not in noise["geometric reprojection"]
     assert ours.at["Ours (MLP-tracker)", "E_v"] == pytest.approx(2.0)
     rec = noise["Ours (MLP-tracker)"]["E_v"]
     assert rec["kind"] == "seeds" and rec["values"] == [1.0, 2.0, 3.0]

@@ -244,7 +244,17 @@ def table_frame(table_id: str, config: Mapping, rows: Sequence[tuple], results: 
                                                      [f[1].get(label, {}).get(col) for f in frames
                                                       if label in f[0].index])
                         for col in values if any(col in f[1].get(label, {}) for f in frames)}
+        # a time / FPS cell measures the machine, not the test scenes: its noise is the spread of the seeds' jobs
+        # (each timed every frame it evaluated), unpaired, without a test-sampling part
+        for col in timing_columns(tcfg):
+            if col in noise[label]:
+                noise[label][col] = noise_lib.seeds(values[col])
     return TableFrame(ours, noise, table_note(config, tcfg, infos[0], max(seen.values()), models, timing))
+
+
+def timing_columns(table_cfg: Mapping) -> list[str]:
+    """The table's measured-time columns (``time_column``, ``fps_column``)."""
+    return [table_cfg[k] for k in ("time_column", "fps_column") if table_cfg.get(k)]
 
 
 SYSTEM_NAMES = {"manydepth": "Manydepth", "featdepth": "Feature Depth"}

@@ -93,10 +93,16 @@ def bootstrap_cells(record: dict, layout: str) -> dict[str, dict]:
     return out
 
 
+TIME_COLUMN = "runtime (ms)"
+
+
 def configuration_table(layout: str, rows, results: dict[str, dict]):
     """(ours, noise) of Table II (layout ``errors``) or the synthetic ablation (``ablation``): one line per row
     label; a label with several runs (seeds) is their mean with the seed spread and the paired bootstrap of that
-    mean over the test vehicles (``noise.with_sampling``), a single run gets a paired bootstrap over them."""
+    mean over the test vehicles (``noise.with_sampling``), a single run gets a paired bootstrap over them. The
+    runtime of a label with several runs is the mean of its jobs' median times, with their spread (one timing
+    per job, each the median of ``velocity.mlp.timing_repeats`` calls: ``mlp.forward_time_ms``); a single run's
+    runtime has no noise record, so no claim is decided on it."""
     from redsup.tables import noise as noise_lib
     from redsup.velocity.summary import ablation_table, table2
 
@@ -115,6 +121,10 @@ def configuration_table(layout: str, rows, results: dict[str, dict]):
             noise[label] = {col: noise_lib.with_sampling(noise_lib.seeds([f.at[label, col] for f in per_seed]),
                                                          [b.get(col) for b in boots])
                             for col in error_columns(layout) if col in line.columns}
+            times = [f.at[label, TIME_COLUMN] for f in per_seed] if TIME_COLUMN in line.columns else []
+            if times and all(np.isfinite(times)):
+                # each seed's job timed the estimator velocity.mlp.timing_repeats times (its median): the jobs' spread
+                noise[label][TIME_COLUMN] = noise_lib.seeds(times)
         else:
             noise[label] = bootstrap_cells(results[runs[0]], layout)
         lines.append(line)
