@@ -18,6 +18,10 @@ config.update(_resolved)
 COMPUTE_THREADS = config["jobs"]["compute_threads"]
 job_mem_mb = redsup.jobs.resource(config["jobs"], "mem_mb")
 job_runtime = redsup.jobs.resource(config["jobs"], "runtime")
+# Among ready jobs the greedy scheduler starts those with the largest input files first, so the clip shards (no
+# input) waited to the end of a 2-core build and the velocity chain after them (merge, MedianFlow, generator fit,
+# MLPs) ran last, beside nothing (docs/performance.md#job-order). Its rules start first whenever they are ready.
+VELOCITY_CHAIN_PRIORITY = 1
 
 # conda env of each stage's rules (envs/<stage>.yaml, pinned; used with --sdm conda, e.g. the SLURM profile)
 ENVS = {stage: f"../../envs/{stage}.yaml" for stage in ("data", "velocity", "depth", "calibration", "lifting",

@@ -73,6 +73,7 @@ rule medianflow:
         run="results/runs/prepared/clips/{split}/medianflow.json",
     benchmark:
         "results/benchmarks/medianflow/prepared/clips/{split}/medianflow.tsv",
+    priority: VELOCITY_CHAIN_PRIORITY
     threads: 1
     resources:
         mem_mb=job_mem_mb(2000),

@@ -31,6 +31,7 @@ rule velocity_fit_generator:
         run="results/runs/velocity/generator_statistics.json",
     benchmark:
         "results/benchmarks/velocity_fit_generator/velocity/generator_statistics.tsv",
+    priority: VELOCITY_CHAIN_PRIORITY
     threads: 1
     resources:
         mem_mb=job_mem_mb(1000),
@@ -59,6 +60,7 @@ rule velocity_baseline:
         run=lambda wc: VELOCITY_RUNS[wc.run],
     wildcard_constraints:
         run="|".join(re.escape(r) for r in VELOCITY_BASELINES) or "(?!)",
+    priority: VELOCITY_CHAIN_PRIORITY
     threads: 1
     resources:
         mem_mb=job_mem_mb(1000),
@@ -95,6 +97,7 @@ rule velocity_mlp:
         run=lambda wc: VELOCITY_RUNS[wc.run],
     wildcard_constraints:
         run="|".join(re.escape(r) for r in VELOCITY_MLP) or "(?!)",
+    priority: VELOCITY_CHAIN_PRIORITY
     threads: COMPUTE_THREADS
     resources:
         mem_mb=job_mem_mb(2000),

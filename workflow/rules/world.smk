@@ -47,6 +47,7 @@ rule world_clips_shard:
         run="results/runs/raw/clip_shards/{split}/{shard}.json",
     benchmark:
         "results/benchmarks/world_clips_shard/raw/clip_shards/{split}/{shard}.tsv",
+    priority: VELOCITY_CHAIN_PRIORITY
     threads: COMPUTE_THREADS
     resources:
         mem_mb=job_mem_mb(3000),
@@ -69,6 +70,7 @@ rule world_clips:
         run="results/runs/raw/clips/{split}.json",
     benchmark:
         "results/benchmarks/world_clips/raw/clips/{split}.tsv",
+    priority: VELOCITY_CHAIN_PRIORITY
     threads: 1
     resources:
         mem_mb=job_mem_mb(1000),
