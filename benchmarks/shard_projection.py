@@ -16,10 +16,9 @@ import os
 from pathlib import Path
 
 from redsup import schedule
-from redsup.job_benchmarks import collect, dependencies, job_name
+from redsup.job_benchmarks import PROJECTED_CORES, collect, dependencies, job_name
 
 SHARD_RULE = "world_clips_shard"
-CORES = (2, 8, 32, 128)
 
 
 def merge_shards(durations: dict[str, float], deps: dict[str, set[str]]) -> tuple[dict[str, float], dict]:
@@ -44,7 +43,7 @@ def merge_shards(durations: dict[str, float], deps: dict[str, set[str]]) -> tupl
 
 def report(label: str, durations: dict[str, float], deps: dict[str, set[str]]) -> None:
     path, length = schedule.critical_path(durations, deps)
-    walls = {c: schedule.makespan(durations, deps, c) for c in CORES}
+    walls = {c: schedule.makespan(durations, deps, c) for c in PROJECTED_CORES}
     longest = max(durations.items(), key=lambda kv: kv[1])
     print(f"{label}: {len(durations)} jobs, {sum(durations.values()):.0f} job-s; longest job {longest[0]} "
           f"{longest[1]:.0f} s; critical path {length:.0f} s ({length / 60:.1f} min) over {len(path)} jobs")

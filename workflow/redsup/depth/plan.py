@@ -238,17 +238,15 @@ def table_frame(table_id: str, config: Mapping, rows: Sequence[tuple], results: 
         for c, vals in values.items():
             ours.at[label, c] = float(np.mean(vals))
         # rows read from the same trained models (the label's base model, seed by seed) pair up; each seed's
-        # paired bootstrap over its frames gives the test-sampling noise of the seed mean
+        # paired bootstrap over its frames gives the test-sampling noise of the seed mean. A time / FPS cell measures
+        # the machine, not the test scenes: its noise is the spread of the seeds' jobs (each timed every frame it
+        # evaluated), unpaired, without a test-sampling part
         pair = by_label[label].spec.model
-        noise[label] = {col: noise_lib.with_sampling(noise_lib.seeds(values[col], pair),
-                                                     [f[1].get(label, {}).get(col) for f in frames
-                                                      if label in f[0].index])
+        timed = timing_columns(tcfg)
+        noise[label] = {col: noise_lib.seeds(values[col]) if col in timed else
+                        noise_lib.with_sampling(noise_lib.seeds(values[col], pair),
+                                                [f[1].get(label, {}).get(col) for f in frames if label in f[0].index])
                         for col in values if any(col in f[1].get(label, {}) for f in frames)}
-        # a time / FPS cell measures the machine, not the test scenes: its noise is the spread of the seeds' jobs
-        # (each timed every frame it evaluated), unpaired, without a test-sampling part
-        for col in timing_columns(tcfg):
-            if col in noise[label]:
-                noise[label][col] = noise_lib.seeds(values[col])
     return TableFrame(ours, noise, table_note(config, tcfg, infos[0], max(seen.values()), models, timing))
 
 
