@@ -186,21 +186,59 @@ def _beats(cells: _Cells, a: tuple[str, str, float], b: tuple[str, str, float], 
     beyond the noise contradicts)."""
     (ar, am, av), (br, bm, bv) = a, b
     na, nb = cells.noise_of(ar, am), cells.noise_of(br, bm)
-    lo, hi, how = noise_lib.difference_interval(av, bv, na, nb)
+    d, seed_parts, sampling_parts, how = noise_lib.difference_parts(av, bv, na, nb)
+    lo, hi, how = noise_lib.interval(d, seed_parts, sampling_parts, how)
     if lower:  # margin = b - a
         lo, hi = -hi, -lo
     effect = thesis_effect(paper, (ar, am), (br, bm), lower, bv)
-    floor = min_effect * effect if min_effect is not None and effect is not None else 0.0
+    floor = (min_effect * effect if effect is not None else 0.0) if min_effect is not None else None
+    return {"verdict": margin_verdict(lo, hi, effect, floor), "lo": lo, "hi": hi, "how": how,
+            "margin": (bv - av) if lower else (av - bv), "thesis_effect": effect, "floor": floor,
+            **_sample_size(na, nb), **_parts(seed_parts, sampling_parts)}
+
+
+def margin_verdict(lo: float, hi: float, effect: float | None, floor: float | None = None) -> str:
+    """The verdict of "a beats b" on the 95 % interval [lo, hi] of its margin (``_beats``): ``effect`` the thesis'
+    effect on our scale (None: unknown), ``floor`` the minimum effect of a "substantially" claim (None: none; 0
+    when the thesis' table cannot size it, which then cannot reproduce)."""
+    f = floor or 0.0
     verdict = noise_lib.verdict_of_interval(lo, hi) or INCONCLUSIVE
-    if verdict == REPRODUCES and lo <= floor:
-        verdict = RULED_OUT if hi < floor else INCONCLUSIVE  # an effect, but not shown to reach the minimum
-    if verdict == INCONCLUSIVE and effect is not None and lo <= 0 <= hi and hi < max(effect, floor):
+    if verdict == REPRODUCES and lo <= f:
+        verdict = RULED_OUT if hi < f else INCONCLUSIVE  # an effect, but not shown to reach the minimum
+    if verdict == INCONCLUSIVE and effect is not None and lo <= 0 <= hi and hi < max(effect, f):
         verdict = RULED_OUT
-    if min_effect is not None and effect is None and verdict == REPRODUCES:
+    if floor is not None and effect is None and verdict == REPRODUCES:
         verdict = INCONCLUSIVE  # a minimum effect the thesis' own table cannot size: not decided
-    return {"verdict": verdict, "lo": lo, "hi": hi, "how": how, "margin": (bv - av) if lower else (av - bv),
-            "thesis_effect": effect, "floor": floor if min_effect is not None else None,
-            **_sample_size(na, nb)}
+    return verdict
+
+
+def close_verdict(lo: float, hi: float, tol: float) -> str:
+    """The verdict of "a is close to b" on the 95 % interval [lo, hi] of a - b against the tolerance ``tol``."""
+    if math.isnan(lo) or math.isnan(hi):
+        return INCONCLUSIVE
+    if -tol - 1e-12 <= lo and hi <= tol + 1e-12:
+        return REPRODUCES
+    if lo > tol or hi < -tol:
+        return CONTRADICTED
+    return INCONCLUSIVE
+
+
+def range_verdict(lo: float, hi: float, low_bound: float = -math.inf, high_bound: float = math.inf) -> str:
+    """The verdict of "the value lies in [low_bound, high_bound]" on its 95 % interval [lo, hi]."""
+    if low_bound <= lo and hi <= high_bound:
+        return REPRODUCES
+    if hi < low_bound or lo > high_bound:
+        return CONTRADICTED
+    return INCONCLUSIVE
+
+
+def _parts(seed_parts: list | None, sampling_parts: list | None) -> dict:
+    """A margin's variance parts as JSON lists ([variance, df] each; None when it has no interval): what the power
+    report projects to more seeds or test clusters."""
+    if seed_parts is None or sampling_parts is None:
+        return {"seed_parts": None, "sampling_parts": None}
+    return {"seed_parts": [[float(v), float(df)] for v, df in seed_parts],
+            "sampling_parts": [[float(v), float(df)] for v, df in sampling_parts]}
 
 
 def _sample_size(*records) -> dict:
@@ -218,16 +256,12 @@ def _margin_text(m: dict) -> str:
     return f"margin 95 % {_ival(m['lo'], m['hi'])}, {m['how']}{extra}"
 
 
-def _value_interval(cells: _Cells, row: str, metric: str, v: float) -> tuple[float, float]:
-    lo, hi, _ = noise_lib.value_interval(v, cells.noise_of(row, metric))
-    return lo, hi
-
-
 def evaluate_check(check: Mapping, cells: _Cells, headline: str | None,
                    paper: _Cells | None = None) -> tuple[str, str, list[dict]]:
     """(verdict, evidence, margins) of one check on one table: reproduces / inconclusive / contradicted /
     thesis-sized effect ruled out (``paper``: the thesis' own table, which sizes its effect), or not testable when
-    it needs a literature row that has no value of ours. ``margins``: the decided comparisons (``_beats``)."""
+    it needs a literature row that has no value of ours. ``margins``: one record a result (a metric of the check):
+    its comparison, interval, verdict and variance parts (what the power report projects), or why it has none."""
     kind = check.get("type")
     if kind not in CHECK_TYPES:
         raise ValueError(f"unknown check type {kind!r} (known: {CHECK_TYPES})")
@@ -250,10 +284,10 @@ def evaluate_check(check: Mapping, cells: _Cells, headline: str | None,
             wlabel = f"{wr} [{wm}]" if cellwise else wr
             if b is None or w is None:
                 missing = [x for x, v in ((label, b), (wlabel, w)) if v is None]
-                results.append((INCONCLUSIVE, f"{prefix}missing {', '.join(missing)}"))
+                _unsized(results, margins, kind, f"{prefix}missing {', '.join(missing)}")
                 continue
             m = _beats(cells, (br, bm, b), (wr, wm, w), lower, paper, min_effect)
-            margins.append({"comparison": f"{label} vs {wlabel}", **m})
+            margins.append({"comparison": f"{label} vs {wlabel}", "check": kind, **m})
             rel = "<" if b < w else ">" if b > w else "="
             results.append((m["verdict"], f"{prefix}{label} {_fmt(b)} {rel} {wlabel} {_fmt(w)} "
                                           f"({'lower' if lower else 'higher'} is better; {_margin_text(m)})"))
@@ -271,55 +305,55 @@ def evaluate_check(check: Mapping, cells: _Cells, headline: str | None,
             v = cells.get(row, metric)
             word = "worst" if worst else "best"
             if v is None:
-                results.append((INCONCLUSIVE, f"{metric}: missing {row}"))
+                _unsized(results, margins, kind, f"{metric}: missing {row}")
                 continue
             others = [r for r in pool if row_key(r) != row_key(row)]
             if not others or absent:
                 why = f"missing {', '.join(absent)}" if absent else "no other row to compare"
-                results.append((INCONCLUSIVE, f"{metric}: {row} {_fmt(v)}; {why}"))
+                _unsized(results, margins, kind, f"{metric}: {row} {_fmt(v)}; {why}")
                 continue
             verdicts = {r: _beats(cells, (row, metric, v), (r, metric, cells.get(r, metric)), lower, paper,
                                   min_effect) for r in others}
             verdict, _ = _combine([(x["verdict"], "") for x in verdicts.values()])
             closest = min(verdicts, key=lambda r: (math.inf if math.isnan(verdicts[r]["lo"]) else verdicts[r]["lo"]))
             m = verdicts[closest]  # the smallest lower margin bound
-            margins.append({"comparison": f"{row} vs {closest}", **m})
+            margins.append({"comparison": f"{row} vs {closest}", "check": kind, **m})
             results.append((verdict, f"{metric}: {row} {_fmt(v)}; {word} of {len(pool)} rows; closest "
                                      f"{closest} {_fmt(cells.get(closest, metric))} ({_margin_text(m)})"))
         elif kind == "close":
             a, b = cells.get(check["a"], metric), cells.get(check["b"], metric)
             if a is None or b is None:
                 missing = [x for x, v in ((check["a"], a), (check["b"], b)) if v is None]
-                results.append((INCONCLUSIVE, f"{metric}: missing {', '.join(missing)}"))
+                _unsized(results, margins, kind, f"{metric}: missing {', '.join(missing)}")
                 continue
             tol = float(check["tol"]) * (abs(b) if check.get("relative") else 1.0)
-            lo, hi, how = noise_lib.difference_interval(a, b, cells.noise_of(check["a"], metric),
-                                                        cells.noise_of(check["b"], metric))
+            na, nb = cells.noise_of(check["a"], metric), cells.noise_of(check["b"], metric)
+            d, seed_parts, sampling_parts, how = noise_lib.difference_parts(a, b, na, nb)
+            lo, hi, how = noise_lib.interval(d, seed_parts, sampling_parts, how)
             floor = a == b == 0.0 and lo == hi  # both cells 0 without any spread: a floor, not an equivalence
-            if math.isnan(lo) or floor:
+            if floor:
                 verdict = INCONCLUSIVE
-                how = how + "; both 0 without spread (a floor): equivalence not shown" if floor else how
-            elif -tol - 1e-12 <= lo and hi <= tol + 1e-12:
-                verdict = REPRODUCES
-            elif lo > tol or hi < -tol:
-                verdict = CONTRADICTED
+                how = how + "; both 0 without spread (a floor): equivalence not shown"
             else:
-                verdict = INCONCLUSIVE
+                verdict = close_verdict(lo, hi, tol)
+            margins.append({"comparison": f"{check['a']} − {check['b']}", "check": "close", "verdict": verdict,
+                            "lo": lo, "hi": hi, "how": how, "margin": a - b, "tol": tol, **_sample_size(na, nb),
+                            **_parts(*((None, None) if floor else (seed_parts, sampling_parts)))})
             results.append((verdict, f"{metric}: {check['a']} {_fmt(a)} − {check['b']} {_fmt(b)} = "
                                      f"{_fmt(a - b)} (95 % {_ival(lo, hi)}, {how}) vs ±{_fmt(tol)}"))
         elif kind == "range":
             v = cells.get(check["row"], metric)
             if v is None:
-                results.append((INCONCLUSIVE, f"{metric}: missing {check['row']}"))
+                _unsized(results, margins, kind, f"{metric}: missing {check['row']}")
                 continue
             lo_b, hi_b = check.get("min", -math.inf), check.get("max", math.inf)
-            lo, hi = _value_interval(cells, check["row"], metric, v)
-            if lo_b <= lo and hi <= hi_b:
-                verdict = REPRODUCES
-            elif hi < lo_b or lo > hi_b:
-                verdict = CONTRADICTED
-            else:
-                verdict = INCONCLUSIVE
+            nv = cells.noise_of(check["row"], metric)
+            _, seed_parts, sampling_parts, how = noise_lib.value_parts(v, nv)
+            lo, hi, how = noise_lib.interval(v, seed_parts, sampling_parts, how)
+            verdict = range_verdict(lo, hi, lo_b, hi_b)
+            margins.append({"comparison": check["row"], "check": "range", "verdict": verdict, "lo": lo, "hi": hi,
+                            "how": how, "margin": v, "min": check.get("min"), "max": check.get("max"),
+                            **_sample_size(nv), **_parts(seed_parts, sampling_parts)})
             bounds = " and ".join(x for x in [f"≥ {lo_b}" if "min" in check else "",
                                                f"≤ {hi_b}" if "max" in check else ""] if x)
             results.append((verdict, f"{metric}: {check['row']} {_fmt(v)} (95 % {_ival(lo, hi)}) vs {bounds}"))
@@ -327,19 +361,30 @@ def evaluate_check(check: Mapping, cells: _Cells, headline: str | None,
     return verdict, evidence, margins
 
 
-def _combine(results: list[tuple[str, str]]) -> tuple[str, str]:
-    verdicts = [v for v, _ in results]
+def _unsized(results: list, margins: list, kind: str, evidence: str) -> None:
+    """An inconclusive check result without a margin (a cell missing, no row to compare): its margin record says
+    so, so that the power report does not size the claim on its other checks alone."""
+    results.append((INCONCLUSIVE, evidence))
+    margins.append({"comparison": None, "check": kind, "verdict": INCONCLUSIVE, "lo": math.nan, "hi": math.nan,
+                    "how": evidence, "seed_parts": None, "sampling_parts": None})
+
+
+def combine_verdicts(verdicts: Sequence[str]) -> str:
+    """A claim's verdict from its checks': not testable, contradicted or ruled out when any check is, reproduces
+    when every check does, else inconclusive."""
     if any(v == NOT_TESTABLE for v in verdicts):
-        verdict = NOT_TESTABLE
-    elif any(v == CONTRADICTED for v in verdicts):
-        verdict = CONTRADICTED
-    elif any(v == RULED_OUT for v in verdicts):
-        verdict = RULED_OUT
-    elif verdicts and all(v == REPRODUCES for v in verdicts):
-        verdict = REPRODUCES
-    else:
-        verdict = INCONCLUSIVE
-    return verdict, "; ".join(e for _, e in results)
+        return NOT_TESTABLE
+    if any(v == CONTRADICTED for v in verdicts):
+        return CONTRADICTED
+    if any(v == RULED_OUT for v in verdicts):
+        return RULED_OUT
+    if verdicts and all(v == REPRODUCES for v in verdicts):
+        return REPRODUCES
+    return INCONCLUSIVE
+
+
+def _combine(results: list[tuple[str, str]]) -> tuple[str, str]:
+    return combine_verdicts([v for v, _ in results]), "; ".join(e for _, e in results)
 
 
 # a data description's own checks still say whether its statement is true of our data

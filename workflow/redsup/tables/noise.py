@@ -141,25 +141,69 @@ def t975(df: float | None) -> float:
     return t_quantile(df, LEVEL)
 
 
-def _satterthwaite(parts: Sequence[tuple[float, float]]) -> float | None:
+def _t975_array(df: np.ndarray) -> np.ndarray:
+    """``t975`` elementwise: an infinite df (no finite part) is the normal quantile, as ``t975(None)``."""
+    from scipy import stats as sps
+
+    q = (1 + LEVEL) / 2
+    finite = np.isfinite(df)
+    return np.where(finite, sps.t.ppf(q, np.maximum(np.where(finite, df, 1.0), 1.0)), sps.norm.ppf(q))
+
+
+def _satterthwaite(parts: Sequence[tuple]) -> np.ndarray:
+    """Welch-Satterthwaite degrees of freedom of a sum of variance parts ((variance, df) each, arrays or floats);
+    infinite where no part has a variance."""
     total = sum(v for v, _ in parts)
-    den = sum(v ** 2 / df for v, df in parts if v > 0)
-    return total ** 2 / den if den > 0 else None
+    with np.errstate(divide="ignore", invalid="ignore"):
+        den = sum(np.where(np.asarray(v) > 0, np.asarray(v, float) ** 2 / df, 0.0) for v, df in parts)
+    return np.where(den > 0, total ** 2 / np.where(den > 0, den, 1.0), np.inf)
 
 
-def difference_interval(a: float, b: float, noise_a: Mapping | None = None,
-                        noise_b: Mapping | None = None) -> tuple[float, float, str]:
-    """(low, high, method) of the 95 % interval of ``a - b`` (module docstring); NaN, i.e. no verdict, when a cell
-    has no noise record or its test-sampling noise comes from fewer than MIN_CLUSTERS clusters."""
+def half_width(seed_parts: Sequence[tuple[float, float]], sampling_parts: Sequence[tuple[float, float]],
+               seed_scale=1.0, sampling_scale=1.0):
+    """Half width of the 95 % interval over the seed and sampling variance parts ((variance, df) each): t x sd with
+    Welch-Satterthwaite df, never narrower than the seed part's or the sampling part's own.
+
+    ``seed_scale`` (``sampling_scale``) k multiplies the seeds (test clusters) behind the seed (sampling) parts: a
+    part's variance becomes variance / k and its df (df + 1) k - 1, the interval those units would give at the same
+    spread per unit (the power report's projection). Scales may be arrays: one half width each (an array)."""
+    ks, kc = np.asarray(seed_scale, float), np.asarray(sampling_scale, float)
+    seed = [(v / ks, (df + 1) * ks - 1) for v, df in seed_parts]
+    sampling = [(v / kc, (df + 1) * kc - 1) for v, df in sampling_parts]
+    halves = [_t975_array(_satterthwaite(group)) * np.sqrt(sum(v for v, _ in group))
+              for group in (seed + sampling, seed, sampling) if group]
+    half = np.maximum.reduce(halves) if len(halves) > 1 else halves[0]
+    return float(half) if np.ndim(half) == 0 else half
+
+
+def interval(d: float, seed_parts: list | None, sampling_parts: list | None, how: str) -> tuple[float, float, str]:
+    """(low, high, how) of the 95 % interval d -+ ``half_width`` of the parts; NaN when the parts are None (no
+    interval: ``how`` says why) or not finite, (d, d) when they have no variance (exact values)."""
+    if seed_parts is None or sampling_parts is None:
+        return math.nan, math.nan, how
+    parts = seed_parts + sampling_parts
+    if not all(math.isfinite(v) for v, _ in parts):
+        return math.nan, math.nan, "non-finite"
+    if sum(v for v, _ in parts) == 0.0:
+        return d, d, how
+    half = half_width(seed_parts, sampling_parts)
+    return d - half, d + half, how
+
+
+def difference_parts(a: float, b: float, noise_a: Mapping | None = None,
+                     noise_b: Mapping | None = None) -> tuple[float, list | None, list | None, str]:
+    """(d, seed parts, sampling parts, how) of ``a - b`` (module docstring): the variance parts ((variance, df)
+    each) its 95 % interval is made of; the parts are None when there is no interval (a cell without a noise
+    record, test-sampling noise over fewer than MIN_CLUSTERS clusters, a non-finite value): ``how`` says why."""
     d = a - b
     if not (math.isfinite(a) and math.isfinite(b)):
-        return math.nan, math.nan, "non-finite"
+        return math.nan, None, None, "non-finite"
     if abs(d) <= REL_TIE * max(1.0, abs(a), abs(b)):
         d = 0.0  # a floating-point tie
     if not noise_a or not noise_b:
-        return math.nan, math.nan, NO_RECORD
+        return d, None, None, NO_RECORD
     if few := _few_clusters(noise_a, noise_b):
-        return math.nan, math.nan, few
+        return d, None, None, few
     how = []
     diff = _paired_seed_differences(noise_a, noise_b)
     if diff is not None:
@@ -176,43 +220,41 @@ def difference_interval(a: float, b: float, noise_a: Mapping | None = None,
         sampling_parts = [_sampling_var(boot, _clusters(rec)) for rec, boot in ((noise_a, ba), (noise_b, bb))
                           if boot is not None]
         how += ["cluster bootstrap"] if sampling_parts else []
-    return _interval(d, seed_parts, sampling_parts, " + ".join(how) or "exact values")
+    return d, seed_parts, sampling_parts, " + ".join(how) or "exact values"
 
 
-def value_interval(v: float, noise: Mapping | None) -> tuple[float, float, str]:
-    """95 % interval of one cell's value (a range check), by the rules of ``difference_interval``."""
+def difference_interval(a: float, b: float, noise_a: Mapping | None = None,
+                        noise_b: Mapping | None = None) -> tuple[float, float, str]:
+    """(low, high, method) of the 95 % interval of ``a - b`` (module docstring); NaN, i.e. no verdict, when a cell
+    has no noise record or its test-sampling noise comes from fewer than MIN_CLUSTERS clusters."""
+    return interval(*difference_parts(a, b, noise_a, noise_b))
+
+
+def value_parts(v: float, noise: Mapping | None) -> tuple[float, list | None, list | None, str]:
+    """(v, seed parts, sampling parts, how) of one cell's value (a range check), by the rules of
+    ``difference_parts``."""
     if not math.isfinite(v):
-        return math.nan, math.nan, "non-finite"
+        return v, None, None, "non-finite"
     if not noise:
-        return math.nan, math.nan, NO_RECORD
+        return v, None, None, NO_RECORD
     if few := _few_clusters(noise):
-        return math.nan, math.nan, few
+        return v, None, None, few
     seed_parts = [_seed_part(noise)] if noise["kind"] == "seeds" and len(noise["values"]) >= 2 else []
     boot = _boot_of(noise)
     sampling_parts = [_sampling_var(boot, _clusters(noise))] if boot is not None else []
     how = " + ".join(x for x, p in (("seeds", seed_parts), ("cluster bootstrap", sampling_parts)) if p)
-    return _interval(v, seed_parts, sampling_parts, how or noise["kind"])
+    return v, seed_parts, sampling_parts, how or noise["kind"]
+
+
+def value_interval(v: float, noise: Mapping | None) -> tuple[float, float, str]:
+    """95 % interval of one cell's value (a range check), by the rules of ``difference_interval``."""
+    return interval(*value_parts(v, noise))
 
 
 def _few_clusters(*records: Mapping) -> str | None:
     """Why there is no verdict when a record's test-sampling noise comes from fewer than MIN_CLUSTERS clusters."""
     few = [g for g in (_too_few_clusters(r) for r in records) if g is not None]
     return f"test units in {min(few)} clusters (fewer than {MIN_CLUSTERS})" if few else None
-
-
-def _interval(d: float, seed_parts: list[tuple[float, float]], sampling_parts: list[tuple[float, float]],
-              how: str) -> tuple[float, float, str]:
-    """d -+ t x sd over the seed and sampling variances (Welch-Satterthwaite df), never narrower than the seed
-    part's or the sampling part's interval alone: adding the sampling noise never narrows an interval."""
-    parts = seed_parts + sampling_parts
-    if not all(math.isfinite(v) for v, _ in parts):
-        return math.nan, math.nan, "non-finite"
-    total = sum(v for v, _ in parts)
-    if total == 0.0:
-        return d, d, how
-    half = max(t975(_satterthwaite(group)) * math.sqrt(sum(v for v, _ in group))
-               for group in (parts, seed_parts, sampling_parts) if group)
-    return d - half, d + half, how
 
 
 def _paired_seed_differences(noise_a: Mapping | None, noise_b: Mapping | None) -> np.ndarray | None:
