@@ -6,10 +6,10 @@ PROFILE ?= default
 
 .PHONY: venv browser reproduce test cluster-test lint dry-run mlflow mlflow-sync report rulegraph run-time readme-results clean
 
-$(BIN)/snakemake: pyproject.toml
+$(BIN)/snakemake: pyproject.toml envs/constraints.txt
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet --upgrade pip
-	$(BIN)/pip install --quiet -e ".[test]"
+	$(BIN)/pip install --quiet -c envs/constraints.txt -e ".[test]"
 	touch $@
 
 venv: $(BIN)/snakemake
@@ -33,7 +33,7 @@ test: venv browser
 ## The SLURM profile on a one-node SLURM cluster started here (docs/cluster.md; CI runs it after `test`): as root
 ## it installs slurm-wlm and munge where missing; elsewhere the test skips
 cluster-test: venv
-	$(BIN)/pip install --quiet -e ".[cluster]"
+	$(BIN)/pip install --quiet -c envs/constraints.txt -e ".[cluster]"
 	REDSUP_SLURM_TEST=1 $(BIN)/python -m pytest tests/cluster -m slurm -s --durations=5
 
 lint: venv

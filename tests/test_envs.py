@@ -137,6 +137,16 @@ def test_import_scan_sees_function_level_and_transitive_imports(tmp_path):
     assert "torch" not in third_party_imports(PKG / "scripts" / "world_scene.py")
 
 
+def test_the_venv_is_built_under_the_envs_pins():
+    """`make venv` installs under envs/constraints.txt, which pins exactly the versions the envs pin (one each)."""
+    lines = [x.strip() for x in (ROOT / "envs" / "constraints.txt").read_text().splitlines()]
+    constraints = {x for x in lines if x and not x.startswith("#")}
+    assert all(PINNED.match(x) for x in constraints)
+    assert constraints == {e for p in ENV_FILES for e in _pip(_env(p))}
+    makefile = (ROOT / "Makefile").read_text()
+    assert makefile.count("pip install --quiet -c envs/constraints.txt -e") == 2  # venv, and cluster-test's extra
+
+
 def test_envs_are_pinned_to_the_tested_versions():
     pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
     assert "torch==2.13.0" in pyproject["project"]["dependencies"]
@@ -229,6 +239,6 @@ def test_slurm_profile_and_cluster_extra():
     extras = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["optional-dependencies"]
     assert any(e.startswith("snakemake-executor-plugin-slurm") for e in extras["cluster"])
     guide = (ROOT / "docs" / "cluster.md").read_text()
-    assert "pip install -e \".[cluster]\"" in guide
+    assert "pip install -c envs/constraints.txt -e \".[cluster]\"" in guide
     assert "snakemake --workflow-profile none --profile profiles/slurm --config profile=paper" in guide
     assert yaml.safe_load((ROOT / "profiles" / "default" / "profile.yaml").read_text())["cores"] == "all"
