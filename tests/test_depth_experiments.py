@@ -3,6 +3,7 @@ import copy
 import math
 
 import numpy as np
+import pandas as pd
 import pytest
 import torch
 import yaml
@@ -361,3 +362,27 @@ def test_table_note_joins_a_list_of_notes(cfg):
     assert t6.count("time = seconds per frame of adaptation + prediction") == 1
     f4 = plan.table_note(cfg, cfg["depth"]["tables"]["mccraith_ch4_fig4"], {})
     assert "time = seconds per frame of adaptation + prediction" in f4 and "Eigen = the test scenes" not in f4
+
+
+def test_figures_read_a_row_with_several_seeds_as_its_seed_mean():
+    """Figs. 4 and 5 with a label per training seed (the paper profile's 3 seeds): Fig. 4 plots per frame the mean
+    over a label's runs, Fig. 5 one point per label from the seed-mean table."""
+    from types import SimpleNamespace
+
+    def res(values):
+        return {"records": [{"step": 0, "sequence": "long_000", "frame": f, "metrics": {"abs_rel": v}}
+                            for f, v in enumerate(values)]}
+
+    base, seq = SimpleNamespace(label="baseline", step=0), SimpleNamespace(label="ours", step=0)
+    rows = [base, base, seq]
+    curves = depth_tables.seed_mean_curves(rows, [res([0.1, 0.3]), res([0.2, 0.5]), res([0.4, 0.4])])
+    assert list(curves) == ["baseline", "ours"]
+    assert curves["baseline"] == [("long_000", 0, pytest.approx(0.15)), ("long_000", 1, pytest.approx(0.4))]
+    assert curves["ours"] == [("long_000", 0, 0.4), ("long_000", 1, 0.4)]
+    fig = depth_tables.fig4(rows, [res([0.1, 0.3]), res([0.2, 0.5]), res([0.4, 0.4])])
+    assert [t.get_text() for t in fig.axes[0].get_legend().get_texts()] == [
+        "baseline (mean 0.275, mean of 2 seeds)", "ours (mean 0.400)"]
+    cs = [SimpleNamespace(label=f"CS | {s}") for s in (0, 50)]
+    table = pd.DataFrame({"Abs Rel": [0.21, 0.19]}, index=["CS | 0", "CS | 50"])
+    line = depth_tables.fig5([cs[0], cs[0], cs[1], cs[1]], table).axes[0].get_lines()[0]
+    assert list(line.get_xdata()) == [0, 50] and list(line.get_ydata()) == [0.21, 0.19]

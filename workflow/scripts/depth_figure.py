@@ -13,10 +13,10 @@ sm = snakemake  # noqa: F821
 figure_id = sm.wildcards.figure
 tcfg = sm.config["depth"]["tables"][figure_id]
 by_label = {r.label: r for r in plan.expand_rows(figure_id, sm.config["depth"])}
-rows = [by_label[label] for label, _, _ in sm.params.rows]
-results = [read_json(plan.result_path(run)) for _, run, _ in sm.params.rows]
-DRAW = {"per_frame": lambda: depth_tables.fig4(rows, results),
-        "steps": lambda: depth_tables.fig5(rows, results, depth_tables.table_frame(rows, results)[0])}
+rows = [by_label[label] for label, _, _ in sm.params.rows]  # one line per run: a label per training seed
+results = {run: read_json(plan.result_path(run)) for _, run, _ in sm.params.rows}
+DRAW = {"per_frame": lambda: depth_tables.fig4(rows, [results[run] for _, run, _ in sm.params.rows]),
+        "steps": lambda: depth_tables.fig5(rows, plan.table_frame(figure_id, sm.config, sm.params.rows, results).ours)}
 with child_run(sm.log.run, figure_id, "figure", rule=sm.rule, wildcards=dict(sm.wildcards), config=sm.config) as run:
     fig = DRAW[tcfg["figure"]]()
     fig.savefig(sm.output[0], dpi=110)

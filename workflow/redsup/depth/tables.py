@@ -7,6 +7,7 @@ the ``skipped`` column counts the frames a row itself could not evaluate, and ``
 """
 from __future__ import annotations
 
+from collections import Counter
 from collections.abc import Mapping, Sequence as Seq
 
 import numpy as np
@@ -100,16 +101,29 @@ def per_frame(row: Row, result: Mapping, metric: str = "abs_rel") -> list[tuple[
                   if r.get("metrics") is not None)
 
 
+def seed_mean_curves(rows: Seq[Row], results: Seq[Mapping], metric: str = "abs_rel") -> dict[str, list]:
+    """{label: [(sequence, frame, value), ...]} in the rows' order: a label that several runs share (a model's
+    training seeds) gets the mean over its runs of each frame's ``metric``."""
+    curves: dict[str, dict[tuple, list[float]]] = {}
+    for row, res in zip(rows, results):
+        frames = curves.setdefault(row.label, {})
+        for seq, frame, v in per_frame(row, res, metric):
+            frames.setdefault((seq, frame), []).append(v)
+    return {label: sorted((seq, frame, float(np.mean(v))) for (seq, frame), v in frames.items())
+            for label, frames in curves.items()}
+
+
 def fig4(rows: Seq[Row], results: Seq[Mapping]):
-    """Per-frame Abs Rel along the long sequence(s): baseline vs sequential adaptation."""
+    """Per-frame Abs Rel along the long sequence(s): baseline vs sequential adaptation (per frame the mean over a
+    row's training seeds)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    runs = Counter(row.label for row in rows)
     fig, ax = plt.subplots(figsize=(8, 3.2))
-    for row, res in zip(rows, results):
-        pts = per_frame(row, res)
+    for label, pts in seed_mean_curves(rows, results).items():
         seqs = sorted({p[0] for p in pts})
         offset, xs, ys = 0, [], []
         for s in seqs:  # sequences side by side
@@ -117,7 +131,8 @@ def fig4(rows: Seq[Row], results: Seq[Mapping]):
             xs += [offset + t for t, _ in f]
             ys += [v for _, v in f]
             offset += max(t for t, _ in f) + 1
-        ax.plot(xs, ys, lw=1.0, label=f"{row.label} (mean {np.mean(ys):.3f})" if ys else row.label)
+        seeds = f", mean of {runs[label]} seeds" if runs[label] > 1 else ""
+        ax.plot(xs, ys, lw=1.0, label=f"{label} (mean {np.mean(ys):.3f}{seeds})" if ys else label)
     ax.set_xlabel("frame of the long sequence")
     ax.set_ylabel("Abs Rel")
     ax.set_title("Per-frame depth error along the long sequence (ch. 4 Fig. 4)")
@@ -127,8 +142,9 @@ def fig4(rows: Seq[Row], results: Seq[Mapping]):
     return fig
 
 
-def fig5(rows: Seq[Row], results: Seq[Mapping], table: pd.DataFrame):
-    """Abs Rel vs adaptation steps for the other-domain (CS) and the target-domain (K) model."""
+def fig5(rows: Seq[Row], table: pd.DataFrame):
+    """Abs Rel vs adaptation steps for the other-domain (CS) and the target-domain (K) model: ``table`` one line per
+    row label (the seed mean where a row has several seeds, ``redsup.depth.plan.table_frame``)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -136,7 +152,7 @@ def fig5(rows: Seq[Row], results: Seq[Mapping], table: pd.DataFrame):
 
     fig, ax = plt.subplots(figsize=(5.5, 3.6))
     series: dict[str, list[tuple[int, float]]] = {}
-    for row in rows:
+    for row in {r.label: r for r in rows}.values():
         tag, step = row.label.split(" | ")
         series.setdefault(tag, []).append((int(step), float(table.loc[row.label, "Abs Rel"])))
     names = {"CS": "CS: trained on the other domain", "K": "K: trained on the target domain"}
