@@ -25,6 +25,16 @@ def _claim(verdict, *margins):
     return {"text": "t", "verdict": verdict, "margins": list(margins)}
 
 
+def test_t_quantile_takes_one_df_or_an_array():
+    from redsup.stats import t_quantile
+
+    # printed t tables: t(2) 4.303, t(9) 2.262, t(39) 2.023; no df / infinite: the normal 1.960; df < 1 counts as 1
+    assert t_quantile(9) == pytest.approx(2.262157, rel=1e-6) and isinstance(t_quantile(9), float)
+    assert t_quantile(None) == t_quantile(math.inf) == pytest.approx(Z) and t_quantile(0.5) == t_quantile(1)
+    many = t_quantile([2, 39, math.inf])
+    assert many == pytest.approx([4.302653, 2.022691, Z], rel=1e-6)
+
+
 def test_more_clusters_decide_a_bootstrap_margin_where_sqrt_k_passes_t():
     # centre 0.01, sd 0.01 over 10 clusters (df 9): half t(9) 0.01 = 0.0226 holds 0. At k x the clusters the half
     # width is t(10k - 1) 0.01 / sqrt(k): still >= 0.01 at k = 4 (t(39) = 2.023 > 2), below it at k = 4.2

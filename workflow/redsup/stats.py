@@ -77,11 +77,13 @@ def resampled_means(values_by_sorted_id: np.ndarray, unit_ids: Sequence, n: int)
     return sums[draws].sum(axis=1) / counts[draws].sum(axis=1)
 
 
-def t_quantile(df: float | None, level: float = LEVEL) -> float:
-    """Two-sided ``level`` quantile of Student's t with ``df`` degrees of freedom (normal when None or infinite)."""
+def t_quantile(df, level: float = LEVEL):
+    """Two-sided ``level`` quantile of Student's t with ``df`` degrees of freedom (normal when None or infinite;
+    df below 1 counts as 1): a float, or an array of them for an array of df."""
     from scipy import stats as sps
 
     q = (1 + level) / 2
-    if df is None or not np.isfinite(df):
-        return float(sps.norm.ppf(q))
-    return float(sps.t.ppf(q, max(float(df), 1.0)))
+    d = np.asarray(np.inf if df is None else df, dtype=float)
+    finite = np.isfinite(d)
+    out = np.where(finite, sps.t.ppf(q, np.maximum(np.where(finite, d, 1.0), 1.0)), sps.norm.ppf(q))
+    return float(out) if out.ndim == 0 else out

@@ -338,7 +338,7 @@ def evaluate_check(check: Mapping, cells: _Cells, headline: str | None,
                 verdict = close_verdict(lo, hi, tol)
             margins.append({"comparison": f"{check['a']} − {check['b']}", "check": "close", "verdict": verdict,
                             "lo": lo, "hi": hi, "how": how, "margin": a - b, "tol": tol, **_sample_size(na, nb),
-                            **_parts(*((None, None) if floor else (seed_parts, sampling_parts)))})
+                            **(_parts(None, None) if floor else _parts(seed_parts, sampling_parts))})
             results.append((verdict, f"{metric}: {check['a']} {_fmt(a)} − {check['b']} {_fmt(b)} = "
                                      f"{_fmt(a - b)} (95 % {_ival(lo, hi)}, {how}) vs ±{_fmt(tol)}"))
         elif kind == "range":

@@ -136,20 +136,6 @@ def _too_few_clusters(noise: Mapping) -> int | None:
     return g if g < MIN_CLUSTERS else None
 
 
-def t975(df: float | None) -> float:
-    """Two-sided 95 % quantile of Student's t (normal for None)."""
-    return t_quantile(df, LEVEL)
-
-
-def _t975_array(df: np.ndarray) -> np.ndarray:
-    """``t975`` elementwise: an infinite df (no finite part) is the normal quantile, as ``t975(None)``."""
-    from scipy import stats as sps
-
-    q = (1 + LEVEL) / 2
-    finite = np.isfinite(df)
-    return np.where(finite, sps.t.ppf(q, np.maximum(np.where(finite, df, 1.0), 1.0)), sps.norm.ppf(q))
-
-
 def _satterthwaite(parts: Sequence[tuple]) -> np.ndarray:
     """Welch-Satterthwaite degrees of freedom of a sum of variance parts ((variance, df) each, arrays or floats);
     infinite where no part has a variance."""
@@ -170,7 +156,7 @@ def half_width(seed_parts: Sequence[tuple[float, float]], sampling_parts: Sequen
     ks, kc = np.asarray(seed_scale, float), np.asarray(sampling_scale, float)
     seed = [(v / ks, (df + 1) * ks - 1) for v, df in seed_parts]
     sampling = [(v / kc, (df + 1) * kc - 1) for v, df in sampling_parts]
-    halves = [_t975_array(_satterthwaite(group)) * np.sqrt(sum(v for v, _ in group))
+    halves = [t_quantile(_satterthwaite(group), LEVEL) * np.sqrt(sum(v for v, _ in group))
               for group in (seed + sampling, seed, sampling) if group]
     half = np.maximum.reduce(halves) if len(halves) > 1 else halves[0]
     return float(half) if np.ndim(half) == 0 else half
